@@ -1,0 +1,50 @@
+//! The coupling API between deformables (FEM, PBD) and the rigid world.
+//!
+//! Deformable solvers ask for the colliders near a point ([`ContactQuery`]) and hand back the
+//! impulses they applied ([`Reaction`]); the rigid plugin turns those into forces on the bodies
+//! (forces, because rapier ignores impulses on multibody links). The types are plain data so the
+//! solvers stay independent of rapier.
+
+use nalgebra::Vector3;
+
+/// Closest point of a rigid collider near a query point (world frame, SI units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointContact {
+    /// Closest point on the collider's surface, m.
+    pub point: Vector3<f64>,
+    /// Unit normal, outward from the collider.
+    pub normal: Vector3<f64>,
+    /// Signed distance of the query point along `normal`, m (negative inside).
+    pub distance: f64,
+    /// Coulomb friction coefficient of the collider's material.
+    pub friction: f64,
+    /// Id of the rigid body the collider belongs to (for reactions); `u32::MAX` for colliders
+    /// without a body.
+    pub body: u32,
+    /// Velocity of the collider surface at `point`, m/s.
+    pub velocity: Vector3<f64>,
+}
+
+/// Rigid-world queries a deformable solver needs.
+pub trait ContactQuery {
+    /// Appends one [`PointContact`] per collider within `max_distance` of `p` to `out`.
+    fn contacts_near(&self, p: &Vector3<f64>, max_distance: f64, out: &mut Vec<PointContact>);
+}
+
+/// An impulse a deformable applied to rigid body `body` at `point` during a substep, N s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reaction {
+    /// Body id as given in [`PointContact::body`].
+    pub body: u32,
+    /// Application point, world frame, m.
+    pub point: Vector3<f64>,
+    /// Impulse on the rigid body, world frame, N s.
+    pub impulse: Vector3<f64>,
+}
+
+/// A world without colliders (for solvers used standalone).
+pub struct NoColliders;
+
+impl ContactQuery for NoColliders {
+    fn contacts_near(&self, _p: &Vector3<f64>, _max_distance: f64, _out: &mut Vec<PointContact>) {}
+}

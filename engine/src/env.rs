@@ -1,0 +1,505 @@
+//! Gymnasium-style environments: [`Env`] (one world) and [`VecEnv`] (N worlds stepped in
+//! parallel with rayon).
+//!
+//! Buffers are flat and row-major: observations `n_envs x obs_dim` (f32), actions
+//! `n_envs x act_dim` (f32; a `Discrete` action is one f32 holding the integer). Autoreset is
+//! **same-step** ([`AutoresetMode::SameStep`], Gymnasium's `SAME_STEP`): when an episode ends,
+//! the returned observation is already the first of the next episode, and the last observation
+//! and info of the finished one are in `info.final_observation` / `info.final_info`.
+//!
+//! Determinism: each env has its own world and RNG; the step of one env never reads another, so
+//! results are bit-identical for any number of envs and threads.
+
+use std::collections::BTreeMap;
+
+use bevy_ecs::prelude::*;
+use rayon::prelude::*;
+
+use crate::app::{SimApp, SimErrors};
+use crate::rng::EnvRng;
+use crate::state::{state_hash, Snapshot};
+
+/// The raw action of this env for the current step (written by the env before `EnvStep`).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct ActionBuffer(pub Vec<f32>);
+
+/// The flat observation of this env (written by `Observe` systems).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct ObservationBuffer(pub Vec<f32>);
+
+/// What `Evaluate` systems report for the current step (cleared before each step).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct StepSignals {
+    /// Reward of this step.
+    pub reward: f64,
+    /// The episode reached a terminal state (success or failure of the MDP).
+    pub terminated: bool,
+    /// The episode was cut short (time limit, error).
+    pub truncated: bool,
+    /// Task success, when the task defines it.
+    pub success: Option<bool>,
+    /// Named scalar diagnostics (reward terms, distances...).
+    pub values: BTreeMap<String, f64>,
+}
+
+/// A space, as Gymnasium declares them.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Space {
+    /// A box of f32 values with per-element bounds (row-major `shape`).
+    Box {
+        /// Lower bounds (len = product of shape); -inf allowed.
+        low: Vec<f32>,
+        /// Upper bounds; +inf allowed.
+        high: Vec<f32>,
+        /// Shape.
+        shape: Vec<usize>,
+    },
+    /// Integers 0..n, stored as one f32 in flat buffers.
+    Discrete {
+        /// Number of values.
+        n: u64,
+    },
+    /// Named sub-spaces, flattened in order.
+    Dict(Vec<(String, Space)>),
+}
+
+impl Space {
+    /// An unbounded box of `dim` values.
+    pub fn unbounded(dim: usize) -> Self {
+        Space::Box {
+            low: vec![f32::NEG_INFINITY; dim],
+            high: vec![f32::INFINITY; dim],
+            shape: vec![dim],
+        }
+    }
+
+    /// Number of f32 values in a flat buffer of this space.
+    pub fn flat_dim(&self) -> usize {
+        match self {
+            Space::Box { shape, .. } => shape.iter().product(),
+            Space::Discrete { .. } => 1,
+            Space::Dict(items) => items.iter().map(|(_, s)| s.flat_dim()).sum(),
+        }
+    }
+
+    /// Checks a flat value: length, finiteness, bounds (boxes are clipped by action terms, so only
+    /// non-finite values and out-of-range discrete values are errors). `Err` names the index.
+    pub fn check(&self, x: &[f32]) -> Result<(), String> {
+        if x.len() != self.flat_dim() {
+            return Err(format!(
+                "length {} but the space has {} values",
+                x.len(),
+                self.flat_dim()
+            ));
+        }
+        if let Some((i, v)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(format!("[{i}] = {v}: values must be finite"));
+        }
+        let mut offset = 0;
+        self.check_discrete(x, &mut offset)
+    }
+
+    fn check_discrete(&self, x: &[f32], offset: &mut usize) -> Result<(), String> {
+        match self {
+            Space::Box { .. } => *offset += self.flat_dim(),
+            Space::Discrete { n } => {
+                let v = x[*offset];
+                if v < 0.0 || v.fract() != 0.0 || (v as u64) >= *n {
+                    return Err(format!("[{offset}] = {v}: a Discrete({n}) value is an integer in 0..{n}"));
+                }
+                *offset += 1;
+            }
+            Space::Dict(items) => {
+                for (_, s) in items {
+                    s.check_discrete(x, offset)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Observation and action spaces of an env (set by the task; empty boxes by default).
+#[derive(Resource, Debug, Clone, PartialEq)]
+pub struct Spaces {
+    /// Observation space.
+    pub observation: Space,
+    /// Action space.
+    pub action: Space,
+}
+
+impl Default for Spaces {
+    fn default() -> Self {
+        Self {
+            observation: Space::unbounded(0),
+            action: Space::unbounded(0),
+        }
+    }
+}
+
+/// How finished episodes are reset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AutoresetMode {
+    /// Reset in the same `step` call; final observation and info in the info (Gymnasium `SAME_STEP`).
+    SameStep,
+}
+
+/// Per-env information of a step or reset.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EnvInfo {
+    /// Task success, when defined.
+    pub success: Option<bool>,
+    /// Why the episode ended with an error (physics blow-up, non-finite action, plugin failure).
+    pub error: Option<String>,
+    /// Named diagnostics of the step.
+    pub values: BTreeMap<String, f64>,
+    /// Set on the step an episode ends: its return and length.
+    pub episode: Option<EpisodeStats>,
+    /// Same-step autoreset: the last observation of the finished episode.
+    pub final_observation: Option<Vec<f32>>,
+    /// Same-step autoreset: the info of the finished episode's last step.
+    pub final_info: Option<Box<EnvInfo>>,
+}
+
+/// Summary of a finished episode.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EpisodeStats {
+    /// Sum of rewards.
+    pub r#return: f64,
+    /// Number of env steps.
+    pub length: u64,
+    /// Success at the end, when defined.
+    pub success: Option<bool>,
+    /// Whether it ended with an error.
+    pub error: bool,
+}
+
+/// The result of one env step.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StepOutcome {
+    /// Observation (of the next episode when this one ended).
+    pub observation: Vec<f32>,
+    /// Reward.
+    pub reward: f64,
+    /// Terminal state reached.
+    pub terminated: bool,
+    /// Episode cut short.
+    pub truncated: bool,
+    /// Info.
+    pub info: EnvInfo,
+}
+
+/// One environment: an app with a spawned scene and the snapshot it resets to.
+pub struct Env {
+    /// The app (world and schedules).
+    pub app: SimApp,
+    initial: Snapshot,
+    episode_return: f64,
+    /// Errors that ended episodes since creation.
+    pub error_count: u64,
+    /// Reset finished episodes inside `step` (same-step autoreset; default true). With false,
+    /// the world keeps the final state until the caller calls `reset`.
+    pub autoreset: bool,
+}
+
+impl Env {
+    /// Wraps an app whose scene is spawned; the current state becomes the reset state.
+    pub fn new(mut app: SimApp) -> Self {
+        app.world.init_resource::<Spaces>();
+        let initial = Snapshot::take(&app.world);
+        Self {
+            app,
+            initial,
+            episode_return: 0.0,
+            error_count: 0,
+            autoreset: true,
+        }
+    }
+
+    /// Observation and action spaces.
+    pub fn spaces(&self) -> Spaces {
+        self.app.world.resource::<Spaces>().clone()
+    }
+
+    /// Starts a new episode; with a seed, the env's RNG is reseeded first.
+    pub fn reset(&mut self, seed: Option<u64>) -> (Vec<f32>, EnvInfo) {
+        let rng = *self.app.world.resource::<EnvRng>();
+        self.initial.restore(&mut self.app.world);
+        *self.app.world.resource_mut::<EnvRng>() = match seed {
+            Some(s) => EnvRng::from_seed(s),
+            None => rng,
+        };
+        self.app.world.resource_mut::<SimErrors>().current.clear();
+        *self.app.world.resource_mut::<StepSignals>() = StepSignals::default();
+        self.app.run_reset_pass();
+        self.episode_return = 0.0;
+        let info = EnvInfo::default();
+        (self.observation(), info)
+    }
+
+    /// The current observation buffer.
+    pub fn observation(&self) -> Vec<f32> {
+        self.app.world.resource::<ObservationBuffer>().0.clone()
+    }
+
+    /// One step with same-step autoreset.
+    pub fn step(&mut self, action: &[f32]) -> StepOutcome {
+        let spaces = self.app.world.resource::<Spaces>().clone();
+        *self.app.world.resource_mut::<StepSignals>() = StepSignals::default();
+        let mut error = None;
+        match spaces.action.check(action) {
+            Ok(()) => {
+                self.app.world.resource_mut::<ActionBuffer>().0.clear();
+                self.app
+                    .world
+                    .resource_mut::<ActionBuffer>()
+                    .0
+                    .extend_from_slice(action);
+                self.app.step();
+                let errs = &self.app.world.resource::<SimErrors>().current;
+                if !errs.is_empty() {
+                    error = Some(errs.join("; "));
+                }
+            }
+            Err(e) => {
+                // Never reaches the solver: the episode ends here.
+                self.app.world.resource_mut::<SimErrors>().raise(format!("action{e}"));
+                error = Some(format!("action{e}"));
+            }
+        }
+        let signals = self.app.world.resource::<StepSignals>().clone();
+        let mut reward = signals.reward;
+        if !reward.is_finite() {
+            error.get_or_insert_with(|| format!("reward = {reward}: non-finite"));
+            reward = 0.0;
+        }
+        let terminated = signals.terminated && error.is_none();
+        let truncated = signals.truncated || error.is_some();
+        self.episode_return += reward;
+        let mut info = EnvInfo {
+            success: signals.success,
+            error: error.clone(),
+            values: signals.values,
+            ..EnvInfo::default()
+        };
+        let mut observation = self.observation();
+        if error.is_some() {
+            self.error_count += 1;
+        }
+        if terminated || truncated {
+            let length = self.app.world.resource::<crate::SimClock>().episode_steps;
+            info.episode = Some(EpisodeStats {
+                r#return: self.episode_return,
+                length,
+                success: signals.success,
+                error: error.is_some(),
+            });
+            if !self.autoreset {
+                return StepOutcome {
+                    observation,
+                    reward,
+                    terminated,
+                    truncated,
+                    info,
+                };
+            }
+            let final_info = info.clone();
+            let (obs, _) = self.reset(None);
+            info = EnvInfo {
+                final_observation: Some(std::mem::replace(&mut observation, obs)),
+                final_info: Some(Box::new(final_info.clone())),
+                ..final_info
+            };
+        }
+        StepOutcome {
+            observation,
+            reward,
+            terminated,
+            truncated,
+            info,
+        }
+    }
+
+    /// Bit-exact hash of the env state.
+    pub fn state_hash(&self) -> u64 {
+        state_hash(&self.app.world)
+    }
+}
+
+/// The result of a vectorised step, flat and row-major.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct VecStep {
+    /// Observations, `n_envs x obs_dim`.
+    pub observations: Vec<f32>,
+    /// Rewards, one per env.
+    pub rewards: Vec<f64>,
+    /// Terminated flags.
+    pub terminated: Vec<bool>,
+    /// Truncated flags.
+    pub truncated: Vec<bool>,
+    /// Infos.
+    pub infos: Vec<EnvInfo>,
+}
+
+/// Errors of the vectorised env's own API (wrong buffer sizes, thread pool).
+#[derive(Debug, thiserror::Error)]
+pub enum VecEnvError {
+    /// The action buffer has the wrong length.
+    #[error("actions: length {got} but {n_envs} envs x {act_dim} action values = {expected} expected")]
+    ActionLength {
+        /// Given length.
+        got: usize,
+        /// Expected length.
+        expected: usize,
+        /// Number of envs.
+        n_envs: usize,
+        /// Values per env.
+        act_dim: usize,
+    },
+    /// The thread pool could not be created.
+    #[error("thread pool: {0}")]
+    ThreadPool(String),
+    /// Building an env failed.
+    #[error("{0}")]
+    Build(String),
+    /// Envs disagree on their spaces.
+    #[error("env {0} has different spaces than env 0")]
+    SpaceMismatch(usize),
+}
+
+/// N environments stepped in parallel.
+pub struct VecEnv {
+    envs: Vec<Env>,
+    pool: rayon::ThreadPool,
+    spaces: Spaces,
+    /// The autoreset mode (always same-step).
+    pub autoreset: AutoresetMode,
+}
+
+impl VecEnv {
+    /// Wraps envs; `threads = 0` uses all cores.
+    pub fn new(envs: Vec<Env>, threads: usize) -> Result<Self, VecEnvError> {
+        if envs.is_empty() {
+            return Err(VecEnvError::Build("a VecEnv needs at least one env".into()));
+        }
+        let spaces = envs[0].spaces();
+        if let Some(i) = envs.iter().position(|e| e.spaces() != spaces) {
+            return Err(VecEnvError::SpaceMismatch(i));
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| VecEnvError::ThreadPool(e.to_string()))?;
+        Ok(Self {
+            envs,
+            pool,
+            spaces,
+            autoreset: AutoresetMode::SameStep,
+        })
+    }
+
+    /// Builds `n` envs with `make(i)` (each returns an app with its scene spawned).
+    pub fn build<E: std::fmt::Display>(
+        n: usize,
+        threads: usize,
+        make: impl Fn(usize) -> Result<SimApp, E>,
+    ) -> Result<Self, VecEnvError> {
+        let envs = (0..n)
+            .map(|i| make(i).map(Env::new).map_err(|e| VecEnvError::Build(e.to_string())))
+            .collect::<Result<Vec<_>, _>>()?;
+        Self::new(envs, threads)
+    }
+
+    /// Number of envs.
+    pub fn len(&self) -> usize {
+        self.envs.len()
+    }
+
+    /// Whether there are no envs (never true for a built VecEnv).
+    pub fn is_empty(&self) -> bool {
+        self.envs.is_empty()
+    }
+
+    /// Threads in the pool.
+    pub fn threads(&self) -> usize {
+        self.pool.current_num_threads()
+    }
+
+    /// The spaces of each env.
+    pub fn spaces(&self) -> &Spaces {
+        &self.spaces
+    }
+
+    /// The envs (read access, e.g. for state dumps).
+    pub fn envs(&self) -> &[Env] {
+        &self.envs
+    }
+
+    /// Mutable access to the envs.
+    pub fn envs_mut(&mut self) -> &mut [Env] {
+        &mut self.envs
+    }
+
+    /// Resets every env; with a seed, env i is seeded with `seed + i`.
+    pub fn reset(&mut self, seed: Option<u64>) -> (Vec<f32>, Vec<EnvInfo>) {
+        let results: Vec<(Vec<f32>, EnvInfo)> = self.pool.install(|| {
+            self.envs
+                .par_iter_mut()
+                .enumerate()
+                .map(|(i, e)| e.reset(seed.map(|s| s.wrapping_add(i as u64))))
+                .collect()
+        });
+        let mut obs = Vec::with_capacity(self.envs.len() * self.spaces.observation.flat_dim());
+        let mut infos = Vec::with_capacity(self.envs.len());
+        for (o, i) in results {
+            obs.extend_from_slice(&o);
+            infos.push(i);
+        }
+        (obs, infos)
+    }
+
+    /// Steps every env with its row of `actions` (`n_envs x act_dim`).
+    pub fn step(&mut self, actions: &[f32]) -> Result<VecStep, VecEnvError> {
+        let act_dim = self.spaces.action.flat_dim();
+        let n = self.envs.len();
+        if actions.len() != n * act_dim {
+            return Err(VecEnvError::ActionLength {
+                got: actions.len(),
+                expected: n * act_dim,
+                n_envs: n,
+                act_dim,
+            });
+        }
+        let outcomes: Vec<StepOutcome> = self.pool.install(|| {
+            if act_dim == 0 {
+                self.envs.par_iter_mut().map(|e| e.step(&[])).collect()
+            } else {
+                self.envs
+                    .par_iter_mut()
+                    .zip(actions.par_chunks(act_dim))
+                    .map(|(e, a)| e.step(a))
+                    .collect()
+            }
+        });
+        let mut out = VecStep {
+            observations: Vec::with_capacity(n * self.spaces.observation.flat_dim()),
+            rewards: Vec::with_capacity(n),
+            terminated: Vec::with_capacity(n),
+            truncated: Vec::with_capacity(n),
+            infos: Vec::with_capacity(n),
+        };
+        for o in outcomes {
+            out.observations.extend_from_slice(&o.observation);
+            out.rewards.push(o.reward);
+            out.terminated.push(o.terminated);
+            out.truncated.push(o.truncated);
+            out.infos.push(o.info);
+        }
+        Ok(out)
+    }
+
+    /// Bit-exact state hash of each env.
+    pub fn state_hashes(&self) -> Vec<u64> {
+        self.envs.iter().map(Env::state_hash).collect()
+    }
+}

@@ -1,0 +1,84 @@
+//! # modesuite-engine
+//!
+//! The engine of modesuite: a Bevy-shaped application layer over `bevy_ecs` ([`SimApp`],
+//! [`Plugin`]), the public schedules and sets every plugin extends ([`EnvStep`], [`PhysicsStep`],
+//! [`Substep`]), one ECS `World` per environment and a parallel [`VecEnv`], scenes in RON
+//! ([`scene`]: parse -> validate -> compile -> spawn), shape generators and tetrahedral meshing
+//! ([`shapes`]), rigid physics with rapier and the deformable coupling API ([`rigid`],
+//! [`coupling`]), snapshots and determinism hashes ([`state`]), and per-env RNGs ([`rng`]).
+//!
+//! ```no_run
+//! use modesuite_engine::prelude::*;
+//!
+//! let text = r#"Scene(objects: [
+//!     (name: "ground", shape: Plane(size: (10.0, 10.0)), body: Static),
+//!     (name: "box", shape: Box(size: (0.2, 0.2, 0.2)), pose: (pos: (0.0, 0.0, 1.0)), body: Dynamic()),
+//! ])"#;
+//! let desc = modesuite_engine::scene::parse_str(text, "<example>").unwrap();
+//! let mut app = SimApp::new();
+//! app.add_plugins(RigidPlugin);
+//! let model = app.compile_scene(&desc, &SceneSource::in_memory(".")).unwrap();
+//! app.spawn_scene(model).unwrap();
+//! let mut env = Env::new(app);
+//! env.reset(Some(0));
+//! for _ in 0..60 {
+//!     env.step(&[]);
+//! }
+//! ```
+#![warn(missing_docs)]
+
+pub mod app;
+pub mod bench;
+pub mod components;
+pub mod coupling;
+pub mod dump;
+pub mod env;
+pub mod math;
+pub mod registry;
+pub mod rigid;
+pub mod rng;
+pub mod scene;
+pub mod shapes;
+pub mod state;
+
+pub use app::{
+    EnvStep, EnvSystems, Phase, PhysicsStep, PhysicsSystems, Plugin, PluginGroup, Plugins, SimApp,
+    SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
+};
+pub use env::{Env, EnvInfo, Space, Spaces, StepOutcome, VecEnv, VecStep};
+pub use rigid::{RigidContext, RigidPlugin, RigidSystems};
+pub use scene::{SceneDesc, SceneError, SceneModel, SceneSource};
+
+/// Re-exports of the math and ECS crates, so plugins use the same versions.
+pub mod deps {
+    pub use bevy_ecs;
+    pub use nalgebra;
+    pub use parry3d;
+    pub use rapier3d;
+    pub use ron;
+}
+
+/// The engine's own plugins (rigid physics).
+pub struct EnginePlugins;
+
+impl PluginGroup for EnginePlugins {
+    fn plugins(self) -> Vec<std::sync::Arc<dyn Plugin>> {
+        vec![std::sync::Arc::new(RigidPlugin)]
+    }
+}
+
+/// Everything a plugin or scene author usually needs.
+pub mod prelude {
+    pub use crate::app::{
+        EnvStep, EnvSystems, Phase, PhysicsStep, PhysicsSystems, Plugin, PluginGroup, SimApp,
+        SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
+    };
+    pub use crate::components::{DeformableNodes, Object, Pose, Velocity};
+    pub use crate::coupling::{ContactQuery, PointContact, Reaction};
+    pub use crate::env::{Env, EnvInfo, Space, Spaces, StepOutcome, VecEnv};
+    pub use crate::rigid::{RigidContext, RigidPlugin, RigidSystems};
+    pub use crate::scene::{SceneDesc, SceneError, SceneSource};
+    pub use crate::shapes::{ShapeDesc, SurfaceMesh, VolumeMesh};
+    pub use crate::EnginePlugins;
+    pub use bevy_ecs::prelude::*;
+}

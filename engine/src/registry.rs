@@ -1,0 +1,137 @@
+//! Registries: named capabilities that plugins add and scene files refer to by name.
+//!
+//! Nothing in the engine is a closed enum of kinds: body kinds (`fem.solid`, `pbd.cloth`),
+//! shape generators (`acme.trefoil`), task terms, robots and sensors are looked up here by name,
+//! so a static plugin, a dynamic (C ABI) plugin and the engine itself extend the same lists.
+
+use std::any::Any;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use bevy_ecs::prelude::*;
+
+use crate::scene::{ObjectDesc, SceneError};
+use crate::shapes::{GeneratedMesh, MeshKind, ShapeContext};
+use crate::SimApp;
+
+/// Compiled, immutable data of one plugin-owned body (shared between envs through `Arc`).
+pub type CompiledBody = Arc<dyn Any + Send + Sync>;
+
+/// What a body kind needs to compile one object.
+pub struct BodyCompileContext<'a> {
+    /// The object as written in the scene.
+    pub object: &'a ObjectDesc,
+    /// Path of the object for error messages, e.g. `objects[2] "rod"`.
+    pub path: String,
+    /// The plugin-owned parameters, as RON text (the `params:` of `Kind(...)`).
+    pub params_ron: &'a str,
+    /// Where mesh files resolve and which generators exist.
+    pub shapes: &'a ShapeContext<'a>,
+    /// Gravity and timing of the scene.
+    pub settings: &'a crate::SimSettings,
+    /// Friction/restitution/density of the object's material.
+    pub material: &'a crate::scene::MaterialDesc,
+}
+
+/// A kind of body provided by a plugin (FEM solid, cloth, ...).
+pub trait BodyKind: Send + Sync + 'static {
+    /// Registry name, e.g. `fem.solid`.
+    fn name(&self) -> &str;
+    /// One line for `modesuite list`.
+    fn description(&self) -> &str;
+    /// Parses and validates the object's parameters and builds the immutable compiled body.
+    fn compile(&self, ctx: &BodyCompileContext) -> Result<CompiledBody, SceneError>;
+    /// Adds the compiled body to an env's world; `entity` already carries `Object` and `Pose`.
+    fn spawn(&self, app: &mut SimApp, entity: Entity, body: &CompiledBody) -> Result<(), SceneError>;
+}
+
+/// A named shape generator (RON: `Gen(name: "acme.trefoil", params: (...))`).
+pub trait ShapeGenerator: Send + Sync + 'static {
+    /// Registry name.
+    fn name(&self) -> &str;
+    /// One line for `modesuite list`.
+    fn description(&self) -> &str;
+    /// Builds a surface or volume mesh from the RON parameters; errors are messages for the user.
+    fn generate(&self, params_ron: &str, want: MeshKind) -> Result<GeneratedMesh, String>;
+}
+
+/// What a task term computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum TermKind {
+    /// Turns part of the raw action into controller inputs.
+    Action,
+    /// Writes part of an observation group.
+    Observation,
+    /// Contributes to the reward.
+    Reward,
+    /// Ends an episode (terminated or truncated).
+    Termination,
+    /// Runs at startup, reset or on an interval (randomisation).
+    Event,
+}
+
+/// A named task term. The payload is owned by the plugin that defines the term protocol
+/// (the tasks plugin downcasts it to its term function type).
+#[derive(Clone)]
+pub struct TermEntry {
+    /// Registry name, e.g. `distance_xy`.
+    pub name: String,
+    /// What the term computes.
+    pub kind: TermKind,
+    /// One line for `modesuite list`.
+    pub description: String,
+    /// The term's implementation, type-erased.
+    pub payload: Arc<dyn Any + Send + Sync>,
+}
+
+/// A named robot (model + controllers), type-erased payload owned by the robots plugin.
+#[derive(Clone)]
+pub struct RobotEntry {
+    /// Registry name, e.g. `franka`.
+    pub name: String,
+    /// One line for `modesuite list`.
+    pub description: String,
+    /// The robot definition, type-erased.
+    pub payload: Arc<dyn Any + Send + Sync>,
+}
+
+/// A named sensor type, type-erased payload owned by the plugin that provides it.
+#[derive(Clone)]
+pub struct SensorEntry {
+    /// Registry name, e.g. `camera.rgbd`.
+    pub name: String,
+    /// One line for `modesuite list`.
+    pub description: String,
+    /// The sensor definition, type-erased.
+    pub payload: Arc<dyn Any + Send + Sync>,
+}
+
+/// All registries of one app. Ordered maps, so listings and iteration are deterministic.
+#[derive(Resource, Default, Clone)]
+pub struct Registry {
+    /// Shape generators by name.
+    pub shapes: BTreeMap<String, Arc<dyn ShapeGenerator>>,
+    /// Body kinds by name (the built-in rigid kinds `Static`, `Dynamic`, `Kinematic` are not here).
+    pub body_kinds: BTreeMap<String, Arc<dyn BodyKind>>,
+    /// Task terms by name.
+    pub terms: BTreeMap<String, TermEntry>,
+    /// Robots by name.
+    pub robots: BTreeMap<String, RobotEntry>,
+    /// Sensors by name.
+    pub sensors: BTreeMap<String, SensorEntry>,
+}
+
+impl crate::shapes::ShapeGenerators for Registry {
+    fn generate(&self, name: &str, params_ron: &str, want: MeshKind) -> Result<GeneratedMesh, String> {
+        match self.shapes.get(name) {
+            Some(g) => g.generate(params_ron, want),
+            None => Err(format!(
+                "unknown shape generator \"{name}\"; registered: [{}]",
+                self.shapes.keys().cloned().collect::<Vec<_>>().join(", ")
+            )),
+        }
+    }
+    fn names(&self) -> Vec<String> {
+        self.shapes.keys().cloned().collect()
+    }
+}

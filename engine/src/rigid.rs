@@ -1,0 +1,458 @@
+//! Rigid physics with rapier: static, dynamic and kinematic bodies, and the coupling API the
+//! deformable plugins use (closest points against colliders, reactions back onto bodies).
+//!
+//! All rapier state lives in [`RigidContext`] (a resource, part of the env state: a snapshot is a
+//! clone of every rapier set, so a restore reproduces the uninterrupted run bit for bit). The
+//! rapier step runs once per substep in [`RigidSystems::Step`] inside `SubstepSystems::Solve`;
+//! deformable solvers order themselves `.before(RigidSystems::Step)` and push their
+//! [`Reaction`]s, which are applied as forces (F = J / dt) in that same step: rapier silently
+//! ignores impulses on multibody links, and forces and torques are both cleared after each step.
+
+use std::any::Any;
+
+use bevy_ecs::prelude::*;
+use nalgebra::{Isometry3, Vector3};
+use parry3d::bounding_volume::Aabb;
+use parry3d::partitioning::{Bvh, BvhBuildStrategy};
+use rapier3d::prelude::*;
+
+use crate::app::{PhysicsSystems, Plugin, SimErrors, SubstepSystems};
+use crate::components::{Pose, Velocity};
+use crate::coupling::{ContactQuery, PointContact, Reaction};
+use crate::math::{pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier};
+use crate::scene::{MaterialDesc, RigidKind, RigidModel, RigidShape};
+use crate::state::{StateHasher, Stateful};
+use crate::SimApp;
+
+/// Sets of the rigid plugin.
+#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+pub enum RigidSystems {
+    /// The rapier step (in `SubstepSystems::Solve`).
+    Step,
+}
+
+/// Handle of an object's rapier body.
+#[derive(Component, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RigidRef(pub RigidBodyHandle);
+
+/// Adds rigid physics (rapier) to an app.
+pub struct RigidPlugin;
+
+impl Plugin for RigidPlugin {
+    fn name(&self) -> &str {
+        "modesuite.rigid"
+    }
+
+    fn build(&self, app: &mut SimApp) {
+        app.insert_resource(RigidContext::new());
+        app.register_stateful::<RigidContext>();
+        app.register_stateful_component::<Pose>();
+        app.register_stateful_component::<Velocity>();
+        app.configure_sets(
+            crate::Substep,
+            RigidSystems::Step.in_set(SubstepSystems::Solve),
+        );
+        app.add_systems(crate::Substep, rigid_step.in_set(RigidSystems::Step));
+        app.add_systems(
+            crate::PhysicsStep,
+            rigid_writeback.in_set(PhysicsSystems::Writeback),
+        );
+    }
+}
+
+/// All rapier state of one env, plus the entity <-> body map and pending reactions.
+#[derive(Resource)]
+pub struct RigidContext {
+    /// Rigid bodies.
+    pub bodies: RigidBodySet,
+    /// Colliders.
+    pub colliders: ColliderSet,
+    /// Impulse joints.
+    pub impulse_joints: ImpulseJointSet,
+    /// Multibody joints (robots).
+    pub multibody_joints: MultibodyJointSet,
+    /// Islands (sleeping).
+    pub islands: IslandManager,
+    /// Broad phase.
+    pub broad_phase: BroadPhaseBvh,
+    /// Narrow phase (contact manifolds, warm-start impulses).
+    pub narrow_phase: NarrowPhase,
+    /// CCD solver.
+    pub ccd: CCDSolver,
+    soft_bodies: SoftBodySet,
+    pipeline: PhysicsPipeline,
+    /// Solver parameters (dt is set from the scene's substep each step).
+    pub params: IntegrationParameters,
+    gravity: Vector3<f64>,
+    /// Body id (index) -> (handle, entity). Ids are what [`PointContact::body`] carries.
+    body_ids: Vec<(RigidBodyHandle, Entity)>,
+    /// Reactions pushed by deformables, applied as forces in the next rapier step.
+    pending: Vec<Reaction>,
+    /// Query acceleration: a BVH over the colliders' current AABBs, leaf -> collider.
+    query_bvh: Bvh,
+    query_leaves: Vec<ColliderHandle>,
+}
+
+#[derive(Clone)]
+struct RigidState {
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    islands: IslandManager,
+    broad_phase: BroadPhaseBvh,
+    narrow_phase: NarrowPhase,
+    ccd: CCDSolver,
+    soft_bodies: SoftBodySet,
+    pending: Vec<Reaction>,
+}
+
+impl Default for RigidContext {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl RigidContext {
+    /// An empty rigid world with gravity -z.
+    pub fn new() -> Self {
+        Self {
+            bodies: RigidBodySet::new(),
+            colliders: ColliderSet::new(),
+            impulse_joints: ImpulseJointSet::new(),
+            multibody_joints: MultibodyJointSet::new(),
+            islands: IslandManager::new(),
+            broad_phase: BroadPhaseBvh::new(),
+            narrow_phase: NarrowPhase::new(),
+            ccd: CCDSolver::new(),
+            soft_bodies: SoftBodySet::new(),
+            pipeline: PhysicsPipeline::new(),
+            params: IntegrationParameters::default(),
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+            body_ids: Vec::new(),
+            pending: Vec::new(),
+            query_bvh: Bvh::new(),
+            query_leaves: Vec::new(),
+        }
+    }
+
+    /// Sets gravity, m/s^2, world frame.
+    pub fn set_gravity(&mut self, g: Vector3<f64>) {
+        self.gravity = g;
+    }
+
+    /// Gravity, m/s^2.
+    pub fn gravity(&self) -> Vector3<f64> {
+        self.gravity
+    }
+
+    /// Adds a body for a compiled rigid object and returns its handle.
+    pub fn add_body(
+        &mut self,
+        entity: Entity,
+        pose: &Isometry3<f64>,
+        model: &RigidModel,
+        material: &MaterialDesc,
+    ) -> RigidBodyHandle {
+        let builder = match model.kind {
+            RigidKind::Static => RigidBodyBuilder::fixed(),
+            RigidKind::Dynamic => RigidBodyBuilder::dynamic()
+                .linvel(vec_to_rapier(&model.linear_velocity))
+                .angvel(vec_to_rapier(&model.angular_velocity)),
+            RigidKind::Kinematic => RigidBodyBuilder::kinematic_position_based(),
+        };
+        let body = builder.pose(pose_to_rapier(pose)).build();
+        let handle = self.bodies.insert(body);
+        let collider = collider_builder(&model.shape)
+            .friction(material.friction as f32)
+            .restitution(material.restitution as f32);
+        let collider = match model.mass {
+            Some(m) => collider.mass(m as f32),
+            None => collider.density(material.density as f32),
+        };
+        self.colliders
+            .insert_with_parent(collider.build(), handle, &mut self.bodies);
+        self.body_ids.push((handle, entity));
+        handle
+    }
+
+    /// Registers a body created elsewhere (robots) so deformable contacts can name it.
+    pub fn register_body(&mut self, handle: RigidBodyHandle, entity: Entity) -> u32 {
+        self.body_ids.push((handle, entity));
+        (self.body_ids.len() - 1) as u32
+    }
+
+    /// The body id ([`PointContact::body`]) of a handle.
+    pub fn body_id(&self, handle: RigidBodyHandle) -> Option<u32> {
+        self.body_ids
+            .iter()
+            .position(|(h, _)| *h == handle)
+            .map(|i| i as u32)
+    }
+
+    /// Handle and entity of a body id.
+    pub fn body_of_id(&self, id: u32) -> Option<(RigidBodyHandle, Entity)> {
+        self.body_ids.get(id as usize).copied()
+    }
+
+    /// Queues an impulse a deformable applied to a body; it is applied as a force in the next
+    /// rapier step.
+    pub fn push_reaction(&mut self, r: Reaction) {
+        self.pending.push(r);
+    }
+
+    /// Rebuilds the collision query structure from the colliders' current poses (done after
+    /// spawning and after every rapier step).
+    pub fn refresh_queries(&mut self) {
+        self.query_leaves.clear();
+        let mut aabbs = Vec::with_capacity(self.colliders.len());
+        for (h, co) in self.colliders.iter() {
+            self.query_leaves.push(h);
+            aabbs.push(co.compute_aabb());
+        }
+        self.query_bvh = Bvh::from_leaves(BvhBuildStrategy::Binned, &aabbs);
+    }
+
+    /// Advances the rigid world by `dt` seconds, applying pending reactions as forces.
+    pub fn step(&mut self, dt: f64) -> Result<(), String> {
+        self.params.dt = dt as f32;
+        let inv_dt = 1.0 / dt;
+        let mut touched = Vec::new();
+        for r in self.pending.drain(..) {
+            if let Some((h, _)) = self.body_ids.get(r.body as usize) {
+                if let Some(b) = self.bodies.get_mut(*h) {
+                    if b.is_dynamic() {
+                        b.add_force_at_point(
+                            vec_to_rapier(&(r.impulse * inv_dt)),
+                            vec_to_rapier(&r.point),
+                            true,
+                        );
+                        touched.push(*h);
+                    }
+                }
+            }
+        }
+        self.pipeline.step(
+            vec_to_rapier(&self.gravity),
+            &self.params,
+            &mut self.islands,
+            &mut self.broad_phase,
+            &mut self.narrow_phase,
+            &mut self.bodies,
+            &mut self.colliders,
+            &mut self.impulse_joints,
+            &mut self.multibody_joints,
+            &mut self.soft_bodies,
+            &mut self.ccd,
+            &(),
+            &(),
+        );
+        for h in touched {
+            if let Some(b) = self.bodies.get_mut(h) {
+                b.reset_forces(false);
+                b.reset_torques(false);
+            }
+        }
+        self.refresh_queries();
+        let q = self.pipeline.quarantine();
+        if !q.is_empty() {
+            return Err(format!(
+                "rigid physics blew up: {} bodies had non-finite state and were disabled",
+                q.bodies().len()
+            ));
+        }
+        for (h, b) in self.bodies.iter() {
+            let t = b.translation();
+            let v = b.linvel();
+            if !(t.is_finite() && v.is_finite()) {
+                return Err(format!("rigid body {h:?} has non-finite position or velocity"));
+            }
+        }
+        Ok(())
+    }
+
+    fn signed_distance(co: &Collider, p: rapier3d::math::Vector) -> Option<f32> {
+        let proj = co.shape().project_point(co.position(), p, false);
+        let d = (p - proj.point).length();
+        Some(if proj.is_inside { -d } else { d })
+    }
+}
+
+impl ContactQuery for RigidContext {
+    fn contacts_near(&self, p: &Vector3<f64>, max_distance: f64, out: &mut Vec<PointContact>) {
+        let pr = vec_to_rapier(p);
+        let m = max_distance as f32;
+        let half = rapier3d::math::Vector::new(m, m, m);
+        let q = Aabb::new(pr - half, pr + half);
+        for leaf in self.query_bvh.leaves(|node| node.aabb().intersects(&q)) {
+            let Some(&ch) = self.query_leaves.get(leaf as usize) else {
+                continue;
+            };
+            let Some(co) = self.colliders.get(ch) else {
+                continue;
+            };
+            let proj = co.shape().project_point(co.position(), pr, false);
+            let delta = pr - proj.point;
+            let dist = delta.length();
+            if dist > m {
+                continue;
+            }
+            let normal = if dist > 1e-7 {
+                let n = delta / dist;
+                if proj.is_inside {
+                    -n
+                } else {
+                    n
+                }
+            } else {
+                // Exactly on the surface: the gradient of the signed distance.
+                let e = 1e-4f32;
+                let mut g = rapier3d::math::Vector::ZERO;
+                for axis in 0..3 {
+                    let mut dp = rapier3d::math::Vector::ZERO;
+                    dp[axis] = e;
+                    let a = Self::signed_distance(co, pr + dp).unwrap_or(0.0);
+                    let b = Self::signed_distance(co, pr - dp).unwrap_or(0.0);
+                    g[axis] = (a - b) / (2.0 * e);
+                }
+                g.normalize_or(rapier3d::math::Vector::Z)
+            };
+            let signed = if proj.is_inside { -dist } else { dist };
+            let (body, velocity) = match co.parent() {
+                Some(bh) => {
+                    let id = self.body_id(bh).unwrap_or(u32::MAX);
+                    let v = self
+                        .bodies
+                        .get(bh)
+                        .map(|b| b.velocity_at_point(proj.point))
+                        .unwrap_or(rapier3d::math::Vector::ZERO);
+                    (id, v)
+                }
+                None => (u32::MAX, rapier3d::math::Vector::ZERO),
+            };
+            out.push(PointContact {
+                point: vec_from_rapier(proj.point),
+                normal: vec_from_rapier(normal),
+                distance: f64::from(signed),
+                friction: f64::from(co.friction()),
+                body,
+                velocity: vec_from_rapier(velocity),
+            });
+        }
+    }
+}
+
+fn collider_builder(shape: &RigidShape) -> ColliderBuilder {
+    match shape {
+        RigidShape::Cuboid(h) => ColliderBuilder::cuboid(h.x as f32, h.y as f32, h.z as f32),
+        RigidShape::Ball(r) => ColliderBuilder::ball(*r as f32),
+        RigidShape::CylinderZ {
+            radius,
+            half_height,
+        } => ColliderBuilder::cylinder(*half_height as f32, *radius as f32)
+            // parry's cylinder is along y; ours along z.
+            .rotation(rapier3d::math::Vector::new(std::f32::consts::FRAC_PI_2, 0.0, 0.0)),
+        RigidShape::CapsuleZ {
+            radius,
+            half_height,
+        } => ColliderBuilder::capsule_z(*half_height as f32, *radius as f32),
+        RigidShape::HalfSpace => ColliderBuilder::halfspace(nalgebra::Unit::new_unchecked(rapier3d::math::Vector::Z)),
+        RigidShape::TriMesh(mesh) => {
+            let (v, i) = mesh_to_rapier(mesh);
+            ColliderBuilder::trimesh(v, i).unwrap_or_else(|_| ColliderBuilder::ball(1e-3))
+        }
+        RigidShape::ConvexDecomposition(mesh) => {
+            let (v, i) = mesh_to_rapier(mesh);
+            ColliderBuilder::convex_decomposition(&v, &i)
+        }
+    }
+}
+
+fn mesh_to_rapier(
+    mesh: &crate::shapes::SurfaceMesh,
+) -> (Vec<rapier3d::math::Vector>, Vec<[u32; 3]>) {
+    (
+        mesh.positions.iter().map(vec_to_rapier).collect(),
+        mesh.triangles.clone(),
+    )
+}
+
+fn rigid_step(
+    mut ctx: ResMut<RigidContext>,
+    settings: Res<crate::SimSettings>,
+    mut errors: ResMut<SimErrors>,
+) {
+    if let Err(e) = ctx.step(settings.substep_dt()) {
+        errors.raise(e);
+    }
+}
+
+fn rigid_writeback(ctx: Res<RigidContext>, mut q: Query<(&RigidRef, &mut Pose, &mut Velocity)>) {
+    for (r, mut pose, mut vel) in &mut q {
+        if let Some(b) = ctx.bodies.get(r.0) {
+            pose.0 = pose_from_rapier(b.position());
+            vel.linear = vec_from_rapier(b.linvel());
+            vel.angular = vec_from_rapier(b.angvel());
+        }
+    }
+}
+
+impl Stateful for RigidContext {
+    fn save_state(&self) -> Box<dyn Any + Send + Sync> {
+        Box::new(RigidState {
+            bodies: self.bodies.clone(),
+            colliders: self.colliders.clone(),
+            impulse_joints: self.impulse_joints.clone(),
+            multibody_joints: self.multibody_joints.clone(),
+            islands: self.islands.clone(),
+            broad_phase: self.broad_phase.clone(),
+            narrow_phase: self.narrow_phase.clone(),
+            ccd: self.ccd.clone(),
+            soft_bodies: self.soft_bodies.clone(),
+            pending: self.pending.clone(),
+        })
+    }
+
+    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) {
+        if let Some(s) = state.downcast_ref::<RigidState>() {
+            let s = s.clone();
+            self.bodies = s.bodies;
+            self.colliders = s.colliders;
+            self.impulse_joints = s.impulse_joints;
+            self.multibody_joints = s.multibody_joints;
+            self.islands = s.islands;
+            self.broad_phase = s.broad_phase;
+            self.narrow_phase = s.narrow_phase;
+            self.ccd = s.ccd;
+            self.soft_bodies = s.soft_bodies;
+            self.pending = s.pending;
+            // The pipeline holds only workspace, but a fresh one also drops memos tied to the
+            // replaced sets.
+            self.pipeline = PhysicsPipeline::new();
+            self.refresh_queries();
+        }
+    }
+
+    fn hash_state(&self, h: &mut StateHasher) {
+        for (_, b) in self.bodies.iter() {
+            let p = b.position();
+            for x in [
+                p.translation.x,
+                p.translation.y,
+                p.translation.z,
+                p.rotation.x,
+                p.rotation.y,
+                p.rotation.z,
+                p.rotation.w,
+            ] {
+                h.write_f32(x);
+            }
+            let v = b.linvel();
+            let w = b.angvel();
+            for x in [v.x, v.y, v.z, w.x, w.y, w.z] {
+                h.write_f32(x);
+            }
+        }
+        h.write_u64(self.pending.len() as u64);
+    }
+}

@@ -1,0 +1,653 @@
+//! Scenes: parse (RON) -> validate -> compile ([`SceneModel`], immutable, shared through `Arc`)
+//! -> spawn (per env).
+//!
+//! A scene can come from a `*.scene.ron` file ([`load_file`]), from a string ([`parse_str`]) or
+//! be built in Rust as a [`SceneDesc`] value. Compilation resolves materials, validates every
+//! number (NaN/inf, non-positive sizes and masses, unknown names, escaping asset paths), meshes the
+//! shapes and lets plugin body kinds compile their own parameters. Errors carry file:line:col for
+//! syntax and unknown fields, and `object.field = value: what is valid` for semantic errors.
+
+mod desc;
+mod error;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use bevy_ecs::prelude::*;
+use nalgebra::{Isometry3, Vector3};
+use ron::value::RawValue;
+
+pub use desc::{BodyDesc, MaterialDesc, ObjectDesc, PhysicsDesc, PoseDesc, SceneDesc};
+pub use error::SceneError;
+
+use crate::components::{Object, Pose};
+use crate::registry::{BodyCompileContext, BodyKind, CompiledBody, Registry};
+use crate::shapes::{ShapeContext, ShapeDesc, ShapeError, SurfaceMesh};
+use crate::{SimApp, SimSettings};
+
+/// Where a scene came from: used for error messages and to resolve relative mesh paths.
+#[derive(Debug, Clone, Default)]
+pub struct SceneSource {
+    /// The file, if the scene was read from one.
+    pub file: Option<PathBuf>,
+    /// Folder relative mesh paths resolve against (the file's folder, or the current directory).
+    pub base_dir: PathBuf,
+    /// Further folders mesh paths may point into (for example the project's `assets/`).
+    pub asset_roots: Vec<PathBuf>,
+    /// The scene text (to locate plugin sections in the file for error positions).
+    pub text: Option<String>,
+}
+
+impl SceneSource {
+    /// A source for a scene built in memory, resolving paths against `base_dir`.
+    pub fn in_memory(base_dir: impl Into<PathBuf>) -> Self {
+        Self {
+            base_dir: base_dir.into(),
+            ..Self::default()
+        }
+    }
+
+    /// The file name for messages (`<memory>` when none).
+    pub fn label(&self) -> String {
+        self.file
+            .as_ref()
+            .map(|f| f.display().to_string())
+            .unwrap_or_else(|| "<memory>".to_string())
+    }
+}
+
+/// Parses scene text; `label` names the file in errors.
+pub fn parse_str(text: &str, label: &str) -> Result<SceneDesc, SceneError> {
+    ron::Options::default()
+        .from_str::<SceneDesc>(text)
+        .map_err(|e| SceneError::from_ron(label, &e))
+}
+
+/// Reads and parses a scene file; the returned source resolves mesh paths next to the file.
+pub fn load_file(path: &Path) -> Result<(SceneDesc, SceneSource), SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|e| SceneError::Io {
+        file: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    let desc = parse_str(&text, &path.display().to_string())?;
+    let base_dir = path
+        .parent()
+        .map(Path::to_path_buf)
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or_else(|| PathBuf::from("."));
+    Ok((
+        desc,
+        SceneSource {
+            file: Some(path.to_path_buf()),
+            base_dir,
+            asset_roots: default_asset_roots(),
+            text: Some(text),
+        },
+    ))
+}
+
+/// The project's asset folder when it can be found (`MODESUITE_ASSETS`, or `assets/` next to the
+/// current directory).
+pub fn default_asset_roots() -> Vec<PathBuf> {
+    let mut roots = Vec::new();
+    if let Ok(p) = std::env::var("MODESUITE_ASSETS") {
+        roots.push(PathBuf::from(p));
+    }
+    let local = PathBuf::from("assets");
+    if local.is_dir() {
+        roots.push(local);
+    }
+    roots
+}
+
+/// How a rigid object moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RigidKind {
+    /// Never moves.
+    Static,
+    /// Simulated.
+    Dynamic,
+    /// Moved by the program.
+    Kinematic,
+}
+
+/// Collision geometry of a rigid object, in its body frame.
+#[derive(Debug, Clone)]
+pub enum RigidShape {
+    /// Box with half extents, m.
+    Cuboid(Vector3<f64>),
+    /// Sphere of radius, m.
+    Ball(f64),
+    /// Cylinder along z.
+    CylinderZ {
+        /// Radius, m.
+        radius: f64,
+        /// Half the height, m.
+        half_height: f64,
+    },
+    /// Capsule along z.
+    CapsuleZ {
+        /// Radius, m.
+        radius: f64,
+        /// Half the length of the cylindrical part, m.
+        half_height: f64,
+    },
+    /// The half space z <= 0 of the body frame (static planes).
+    HalfSpace,
+    /// A triangle mesh (static bodies).
+    TriMesh(Arc<SurfaceMesh>),
+    /// A convex decomposition of a triangle mesh (dynamic and kinematic bodies).
+    ConvexDecomposition(Arc<SurfaceMesh>),
+}
+
+/// A compiled rigid object.
+#[derive(Debug, Clone)]
+pub struct RigidModel {
+    /// How it moves.
+    pub kind: RigidKind,
+    /// Collision geometry.
+    pub shape: RigidShape,
+    /// Mass override, kg (else density x volume).
+    pub mass: Option<f64>,
+    /// Initial linear velocity, m/s.
+    pub linear_velocity: Vector3<f64>,
+    /// Initial angular velocity, rad/s.
+    pub angular_velocity: Vector3<f64>,
+}
+
+/// A compiled body: rigid (engine) or owned by a plugin body kind.
+#[derive(Clone)]
+pub enum BodyModel {
+    /// Simulated by the rigid plugin (rapier).
+    Rigid(RigidModel),
+    /// Simulated by a plugin.
+    Plugin {
+        /// The body kind that compiled it and spawns it.
+        kind: Arc<dyn BodyKind>,
+        /// Its compiled data.
+        compiled: CompiledBody,
+    },
+}
+
+/// One compiled object.
+#[derive(Clone)]
+pub struct ObjectModel {
+    /// Unique name.
+    pub name: String,
+    /// Initial `world_from_body`.
+    pub pose: Isometry3<f64>,
+    /// Resolved material.
+    pub material: MaterialDesc,
+    /// Display colour.
+    pub color: Option<[f32; 3]>,
+    /// The shape as written (renderers mesh it as they need).
+    pub shape: ShapeDesc,
+    /// Body.
+    pub body: BodyModel,
+}
+
+/// A compiled scene: immutable, shared by all envs through `Arc`.
+#[derive(Clone)]
+pub struct SceneModel {
+    /// Timing and gravity.
+    pub settings: SimSettings,
+    /// Objects in spawn order.
+    pub objects: Vec<ObjectModel>,
+    /// Named frames and targets.
+    pub frames: BTreeMap<String, Isometry3<f64>>,
+    /// Episode length in env steps.
+    pub episode_steps: Option<u64>,
+    /// Plugin-owned scene sections, raw RON.
+    pub extensions: BTreeMap<String, Box<RawValue>>,
+    /// One-line description.
+    pub description: Option<String>,
+    /// Where it came from.
+    pub source: SceneSource,
+}
+
+/// Named world frames of the spawned scene (targets, markers).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct NamedFrames(pub BTreeMap<String, Isometry3<f64>>);
+
+/// Episode length limit in env steps (the engine truncates at this count).
+#[derive(Resource, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EpisodeLimit(pub Option<u64>);
+
+fn finite3(v: &[f64; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+fn fmt3(v: &[f64; 3]) -> String {
+    format!("({}, {}, {})", v[0], v[1], v[2])
+}
+
+fn shape_err(path: &str, e: ShapeError) -> SceneError {
+    match e.field() {
+        Some(_) => {
+            let e = e.prefixed(&format!("{path}."));
+            match &e {
+                ShapeError::Invalid {
+                    field,
+                    value,
+                    expected,
+                } => SceneError::semantic(field.clone(), value.clone(), expected.clone()),
+                other => SceneError::semantic(path, "(shape)", other.to_string()),
+            }
+        }
+        None => SceneError::semantic(path, "(shape)", e.to_string()),
+    }
+}
+
+fn validate_physics(p: &PhysicsDesc) -> Result<(), SceneError> {
+    if !(p.dt.is_finite() && p.dt > 0.0 && p.dt <= 1.0) {
+        return Err(SceneError::semantic(
+            "physics.dt",
+            p.dt.to_string(),
+            "a finite step in seconds, 0 < dt <= 1",
+        ));
+    }
+    if !(1..=1000).contains(&p.substeps) {
+        return Err(SceneError::semantic(
+            "physics.substeps",
+            p.substeps.to_string(),
+            "an integer in 1..=1000",
+        ));
+    }
+    if !(1..=1000).contains(&p.decimation) {
+        return Err(SceneError::semantic(
+            "physics.decimation",
+            p.decimation.to_string(),
+            "an integer in 1..=1000",
+        ));
+    }
+    if !finite3(&p.gravity) {
+        return Err(SceneError::semantic(
+            "physics.gravity",
+            fmt3(&p.gravity),
+            "three finite numbers, m/s^2",
+        ));
+    }
+    Ok(())
+}
+
+fn validate_material(name: &str, m: &MaterialDesc) -> Result<(), SceneError> {
+    let path = format!("materials[\"{name}\"]");
+    if !(m.friction.is_finite() && m.friction >= 0.0) {
+        return Err(SceneError::semantic(
+            format!("{path}.friction"),
+            m.friction.to_string(),
+            "a finite number >= 0",
+        ));
+    }
+    if !(m.restitution.is_finite() && (0.0..=1.0).contains(&m.restitution)) {
+        return Err(SceneError::semantic(
+            format!("{path}.restitution"),
+            m.restitution.to_string(),
+            "a number in [0, 1]",
+        ));
+    }
+    if !(m.density.is_finite() && m.density > 0.0) {
+        return Err(SceneError::semantic(
+            format!("{path}.density"),
+            m.density.to_string(),
+            "a finite density > 0, kg/m^3",
+        ));
+    }
+    Ok(())
+}
+
+fn validate_pose(path: &str, p: &PoseDesc) -> Result<(), SceneError> {
+    if !finite3(&p.pos) {
+        return Err(SceneError::semantic(
+            format!("{path}.pos"),
+            fmt3(&p.pos),
+            "three finite numbers, m",
+        ));
+    }
+    if !finite3(&p.rpy) {
+        return Err(SceneError::semantic(
+            format!("{path}.rpy"),
+            fmt3(&p.rpy),
+            "three finite angles, rad",
+        ));
+    }
+    Ok(())
+}
+
+/// Collision shape for a rigid object: primitives map to rapier primitives, the rest to meshes.
+fn rigid_shape(
+    path: &str,
+    shape: &ShapeDesc,
+    kind: RigidKind,
+    ctx: &ShapeContext,
+) -> Result<RigidShape, SceneError> {
+    Ok(match shape {
+        ShapeDesc::Box { size, .. } => {
+            RigidShape::Cuboid(Vector3::new(size.0, size.1, size.2) * 0.5)
+        }
+        ShapeDesc::Sphere { radius, .. } => RigidShape::Ball(*radius),
+        ShapeDesc::Cylinder { radius, height, .. } => RigidShape::CylinderZ {
+            radius: *radius,
+            half_height: height * 0.5,
+        },
+        ShapeDesc::Capsule { radius, height, .. } => RigidShape::CapsuleZ {
+            radius: *radius,
+            half_height: height * 0.5,
+        },
+        ShapeDesc::Plane { .. } => {
+            if kind != RigidKind::Static {
+                return Err(SceneError::semantic(
+                    format!("{path}.body"),
+                    format!("{kind:?}"),
+                    "a Plane is an infinite half space and can only be Static",
+                ));
+            }
+            RigidShape::HalfSpace
+        }
+        other => {
+            let mesh = other.surface(ctx).map_err(|e| shape_err(&format!("{path}.shape"), e))?;
+            if mesh.triangles.is_empty() {
+                return Err(SceneError::semantic(
+                    format!("{path}.shape"),
+                    "(mesh)",
+                    "a shape with at least one triangle (Polyline is a path, not a body)",
+                ));
+            }
+            let mesh = Arc::new(mesh);
+            if kind == RigidKind::Static {
+                RigidShape::TriMesh(mesh)
+            } else {
+                RigidShape::ConvexDecomposition(mesh)
+            }
+        }
+    })
+}
+
+/// Finds where `snippet` starts in `text` (1-based line, col), if it occurs exactly once.
+fn locate(text: &str, snippet: &str) -> Option<(usize, usize)> {
+    let start = text.find(snippet)?;
+    if text[start + 1..].contains(snippet) {
+        return None;
+    }
+    let before = &text[..start];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    Some((line, col))
+}
+
+/// Turns an error a plugin reported for its RON parameters into a file position when the
+/// parameters can be found in the scene text.
+pub fn plugin_params_error(
+    source: &SceneSource,
+    params_ron: &str,
+    path: &str,
+    e: &ron::error::SpannedError,
+) -> SceneError {
+    if let (Some(text), Some((l0, c0))) = (
+        source.text.as_deref(),
+        source.text.as_deref().and_then(|t| locate(t, params_ron)),
+    ) {
+        let _ = text;
+        let line = l0 + e.span.start.line - 1;
+        let col = if e.span.start.line == 1 {
+            c0 + e.span.start.col - 1
+        } else {
+            e.span.start.col
+        };
+        return SceneError::Syntax {
+            file: source.label(),
+            line,
+            col,
+            message: format!("{path}: {}", e.code),
+        };
+    }
+    SceneError::semantic(
+        path,
+        params_ron.trim(),
+        format!("{} (at {} within the parameters)", e.code, e.span.start),
+    )
+}
+
+/// Validates and compiles a scene description with the given registries.
+pub fn compile(desc: &SceneDesc, source: &SceneSource, registry: &Registry) -> Result<SceneModel, SceneError> {
+    let file = source.file.as_ref().map(|f| f.display().to_string());
+    compile_inner(desc, source, registry).map_err(|e| e.in_file(file.as_deref()))
+}
+
+fn compile_inner(desc: &SceneDesc, source: &SceneSource, registry: &Registry) -> Result<SceneModel, SceneError> {
+    validate_physics(&desc.physics)?;
+    let mut materials = desc.materials.clone();
+    materials.entry("default".to_string()).or_default();
+    for (name, m) in &materials {
+        validate_material(name, m)?;
+    }
+    let settings = SimSettings {
+        dt: desc.physics.dt,
+        substeps: desc.physics.substeps,
+        decimation: desc.physics.decimation,
+        gravity: desc::gravity_of(&desc.physics),
+    };
+    if let Some(0) = desc.episode_steps {
+        return Err(SceneError::semantic(
+            "episode_steps",
+            "0",
+            "a positive number of env steps, or leave it out for no limit",
+        ));
+    }
+    let mut frames = BTreeMap::new();
+    for (name, f) in &desc.frames {
+        validate_pose(&format!("frames[\"{name}\"]"), f)?;
+        frames.insert(name.clone(), f.isometry());
+    }
+    let shape_ctx = ShapeContext {
+        base_dir: &source.base_dir,
+        asset_roots: &source.asset_roots,
+        generators: Some(registry),
+    };
+    let mut names = BTreeSet::new();
+    let mut objects = Vec::with_capacity(desc.objects.len());
+    for (i, obj) in desc.objects.iter().enumerate() {
+        let path = format!("objects[{i}] \"{}\"", obj.name);
+        if obj.name.trim().is_empty() {
+            return Err(SceneError::semantic(
+                format!("objects[{i}].name"),
+                format!("{:?}", obj.name),
+                "a non-empty unique name",
+            ));
+        }
+        if !names.insert(obj.name.clone()) {
+            return Err(SceneError::semantic(
+                format!("{path}.name"),
+                format!("{:?}", obj.name),
+                "names must be unique within a scene",
+            ));
+        }
+        obj.shape
+            .validate()
+            .map_err(|e| shape_err(&format!("{path}.shape"), e))?;
+        validate_pose(&format!("{path}.pose"), &obj.pose)?;
+        let material_name = obj.material.clone().unwrap_or_else(|| "default".to_string());
+        let material = *materials.get(&material_name).ok_or_else(|| {
+            SceneError::semantic(
+                format!("{path}.material"),
+                format!("{material_name:?}"),
+                format!(
+                    "one of the scene's materials: [{}]",
+                    materials.keys().cloned().collect::<Vec<_>>().join(", ")
+                ),
+            )
+        })?;
+        if let Some(c) = obj.color {
+            if !c.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x)) {
+                return Err(SceneError::semantic(
+                    format!("{path}.color"),
+                    format!("{c:?}"),
+                    "three numbers in [0, 1]",
+                ));
+            }
+        }
+        let body = match &obj.body {
+            BodyDesc::Static => BodyModel::Rigid(RigidModel {
+                kind: RigidKind::Static,
+                shape: rigid_shape(&path, &obj.shape, RigidKind::Static, &shape_ctx)?,
+                mass: None,
+                linear_velocity: Vector3::zeros(),
+                angular_velocity: Vector3::zeros(),
+            }),
+            BodyDesc::Kinematic => BodyModel::Rigid(RigidModel {
+                kind: RigidKind::Kinematic,
+                shape: rigid_shape(&path, &obj.shape, RigidKind::Kinematic, &shape_ctx)?,
+                mass: None,
+                linear_velocity: Vector3::zeros(),
+                angular_velocity: Vector3::zeros(),
+            }),
+            BodyDesc::Dynamic {
+                mass,
+                linear_velocity,
+                angular_velocity,
+            } => {
+                if let Some(m) = mass {
+                    if !(m.is_finite() && *m > 0.0) {
+                        return Err(SceneError::semantic(
+                            format!("{path}.body.mass"),
+                            m.to_string(),
+                            "a finite mass > 0, kg (or leave it out to use the material density)",
+                        ));
+                    }
+                }
+                if !finite3(linear_velocity) {
+                    return Err(SceneError::semantic(
+                        format!("{path}.body.linear_velocity"),
+                        fmt3(linear_velocity),
+                        "three finite numbers, m/s",
+                    ));
+                }
+                if !finite3(angular_velocity) {
+                    return Err(SceneError::semantic(
+                        format!("{path}.body.angular_velocity"),
+                        fmt3(angular_velocity),
+                        "three finite numbers, rad/s",
+                    ));
+                }
+                BodyModel::Rigid(RigidModel {
+                    kind: RigidKind::Dynamic,
+                    shape: rigid_shape(&path, &obj.shape, RigidKind::Dynamic, &shape_ctx)?,
+                    mass: *mass,
+                    linear_velocity: Vector3::from(*linear_velocity),
+                    angular_velocity: Vector3::from(*angular_velocity),
+                })
+            }
+            BodyDesc::Kind { kind, params } => {
+                let body_kind = registry.body_kinds.get(kind).ok_or_else(|| {
+                    SceneError::semantic(
+                        format!("{path}.body.kind"),
+                        format!("{kind:?}"),
+                        format!(
+                            "a registered body kind: [{}] (or Static, Dynamic, Kinematic); a kind from a compiled plugin needs `--plugin PATH`",
+                            registry.body_kinds.keys().cloned().collect::<Vec<_>>().join(", ")
+                        ),
+                    )
+                })?;
+                let ctx = BodyCompileContext {
+                    object: obj,
+                    path: path.clone(),
+                    params_ron: params.get_ron(),
+                    shapes: &shape_ctx,
+                    settings: &settings,
+                    material: &material,
+                };
+                let compiled = body_kind.compile(&ctx)?;
+                BodyModel::Plugin {
+                    kind: body_kind.clone(),
+                    compiled,
+                }
+            }
+        };
+        objects.push(ObjectModel {
+            name: obj.name.clone(),
+            pose: obj.pose.isometry(),
+            material,
+            color: obj.color,
+            shape: obj.shape.clone(),
+            body,
+        });
+    }
+    Ok(SceneModel {
+        settings,
+        objects,
+        frames,
+        episode_steps: desc.episode_steps,
+        extensions: desc.extensions.clone(),
+        description: desc.description.clone(),
+        source: source.clone(),
+    })
+}
+
+/// Spawns a compiled scene into an app (called by [`SimApp::spawn_scene`]).
+pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneError> {
+    app.world.insert_resource(model.settings);
+    app.world.insert_resource(NamedFrames(model.frames.clone()));
+    app.world.insert_resource(EpisodeLimit(model.episode_steps));
+    let has_rigid = model
+        .objects
+        .iter()
+        .any(|o| matches!(o.body, BodyModel::Rigid(_)));
+    if has_rigid && !app.world.contains_resource::<crate::rigid::RigidContext>() {
+        return Err(SceneError::semantic(
+            "objects",
+            "(rigid bodies)",
+            "the scene has rigid bodies but the app has no RigidPlugin; add modesuite_engine::RigidPlugin",
+        ));
+    }
+    if let Some(mut rigid) = app.world.get_resource_mut::<crate::rigid::RigidContext>() {
+        rigid.set_gravity(model.settings.gravity);
+    }
+    for (i, obj) in model.objects.iter().enumerate() {
+        let entity = app
+            .world
+            .spawn((
+                Object {
+                    name: obj.name.clone(),
+                    index: i as u32,
+                    kind: match &obj.body {
+                        BodyModel::Rigid(r) => format!("{:?}", r.kind).to_lowercase(),
+                        BodyModel::Plugin { kind, .. } => kind.name().to_string(),
+                    },
+                },
+                Pose(obj.pose),
+            ))
+            .id();
+        match &obj.body {
+            BodyModel::Rigid(r) => {
+                let mut rigid = app.world.resource_mut::<crate::rigid::RigidContext>();
+                let handle = rigid.add_body(entity, &obj.pose, r, &obj.material);
+                app.world.entity_mut(entity).insert((
+                    crate::rigid::RigidRef(handle),
+                    crate::components::Velocity {
+                        linear: r.linear_velocity,
+                        angular: r.angular_velocity,
+                    },
+                ));
+            }
+            BodyModel::Plugin { kind, compiled } => kind.spawn(app, entity, compiled)?,
+        }
+    }
+    if let Some(mut rigid) = app.world.get_resource_mut::<crate::rigid::RigidContext>() {
+        rigid.refresh_queries();
+    }
+    Ok(())
+}
+
+/// The engine's own time-limit termination (in `Evaluate`): truncates at `EpisodeLimit`.
+pub(crate) fn time_limit(
+    limit: Option<Res<EpisodeLimit>>,
+    clock: Res<crate::SimClock>,
+    mut signals: ResMut<crate::env::StepSignals>,
+) {
+    if let Some(EpisodeLimit(Some(n))) = limit.as_deref() {
+        if clock.episode_steps >= *n {
+            signals.truncated = true;
+        }
+    }
+}

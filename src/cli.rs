@@ -1,0 +1,571 @@
+//! The `modesuite` command-line tool.
+//!
+//! Public contracts (outside scripts rely on them; extend, never rename):
+//! - `modesuite run SCENE_OR_TASK [--steps N] [--seed S] [--episodes E] [--dump-state FILE.json] [--json]`
+//!   `--dump-state` writes the `modesuite.state.v1` JSON of [`modesuite_engine::dump`] after the
+//!   last step; `--json` prints one JSON object per episode (`episode`, `seed`, `return`, `length`,
+//!   `success`, `error`, `wall_s`, `steps_per_s`) and a final summary object (`summary: true`,
+//!   `episodes`, `success_rate`, `mean_return`, `mean_length`, `errors`, `env_steps_per_s`).
+//! - `modesuite bench NAME [--json]`: with `--json`, one JSON object per line per case with at
+//!   least `case`, `steps_per_s`, `threads`, `envs`.
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::{Parser, Subcommand};
+use serde_json::json;
+
+use modesuite_engine::bench::{BenchOptions, BenchRecord};
+use modesuite_engine::prelude::*;
+use modesuite_engine::scene::{self, SceneModel};
+
+/// Command-line arguments.
+#[derive(Parser, Debug)]
+#[command(
+    name = "modesuite",
+    version,
+    about = "Mobile manipulation of deformable objects: simulator and benchmark",
+    long_about = "Mobile manipulation of deformable objects: simulator and benchmark.\n\nWithout a command, runs the embedded default scene and prints its metrics."
+)]
+pub struct Cli {
+    /// What to do (default: run the embedded default).
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+/// Subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// List tasks, robots, shapes, body kinds, terms, sensors and plugins.
+    List {
+        /// Only this category: tasks, robots, shapes, body-kinds, terms, sensors, plugins.
+        what: Option<String>,
+    },
+    /// Parse, validate and compile scene files; exit 2 on the first error.
+    Validate {
+        /// Scene files (`*.scene.ron`).
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
+    /// Run a scene file or a task id and report per-episode metrics.
+    Run(RunArgs),
+    /// Run a benchmark suite: engine (more suites arrive with their plugins).
+    Bench {
+        /// Suite name.
+        name: String,
+        /// One JSON object per line per case.
+        #[arg(long)]
+        json: bool,
+        /// Scale the number of steps (e.g. 0.1 for a quick run).
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        /// Threads for the all-core cases (0 = all cores).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+    },
+}
+
+/// Arguments of `run`.
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// A `*.scene.ron` file or a task id (`MoDe-<Robot>-<Task>-v0`).
+    pub target: String,
+    /// Env steps per episode (default: the scene's `episode_steps`, else 600).
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Seed of the first episode (episode i uses seed + i).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Number of episodes.
+    #[arg(long, default_value_t = 1)]
+    pub episodes: u64,
+    /// Write the final state (modesuite.state.v1 JSON) to this file.
+    #[arg(long)]
+    pub dump_state: Option<PathBuf>,
+    /// Print one JSON object per episode and a summary object.
+    #[arg(long)]
+    pub json: bool,
+    /// Load a compiled plugin (C ABI).
+    #[arg(long)]
+    pub plugin: Vec<PathBuf>,
+}
+
+/// A CLI failure: the message and the exit code (2 = bad input, 1 = runtime failure).
+#[derive(Debug)]
+pub struct CliError {
+    /// What went wrong, for stderr.
+    pub message: String,
+    /// Process exit code.
+    pub code: i32,
+}
+
+impl CliError {
+    fn input(message: impl Into<String>) -> Self {
+        Self {
+            message: message.into(),
+            code: 2,
+        }
+    }
+    fn runtime(message: impl Into<String>) -> Self {
+        Self {
+            message: message.into(),
+            code: 1,
+        }
+    }
+}
+
+impl From<SceneError> for CliError {
+    fn from(e: SceneError) -> Self {
+        Self::input(e.to_string())
+    }
+}
+
+/// A fresh app with every default plugin.
+pub fn default_app() -> SimApp {
+    let mut app = SimApp::new();
+    app.add_group(crate::DefaultPlugins);
+    app
+}
+
+/// Runs the CLI; returns the process exit code's error on failure.
+pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
+    match cli.command {
+        None => run_default(out),
+        Some(Command::List { what }) => list(what.as_deref(), out),
+        Some(Command::Validate { files }) => validate(&files, out),
+        Some(Command::Run(args)) => run(&args, out),
+        Some(Command::Bench {
+            name,
+            json,
+            scale,
+            threads,
+        }) => bench(&name, json, scale, threads, out),
+    }
+}
+
+fn io(e: std::io::Error) -> CliError {
+    CliError::runtime(format!("output: {e}"))
+}
+
+fn run_default(out: &mut dyn Write) -> Result<(), CliError> {
+    writeln!(
+        out,
+        "modesuite: running the embedded default scene ({}). The MoDeSuite task episode with a video becomes the default once the tasks and render plugins land.",
+        crate::DEFAULT_SCENE_NAME
+    )
+    .map_err(io)?;
+    let desc = scene::parse_str(crate::DEFAULT_SCENE, crate::DEFAULT_SCENE_NAME)?;
+    let source = SceneSource::in_memory(".");
+    let args = RunArgs {
+        target: crate::DEFAULT_SCENE_NAME.to_string(),
+        steps: None,
+        seed: 0,
+        episodes: 1,
+        dump_state: None,
+        json: false,
+        plugin: Vec::new(),
+    };
+    run_scene(&desc, &source, &args, out)
+}
+
+fn list(what: Option<&str>, out: &mut dyn Write) -> Result<(), CliError> {
+    let app = default_app();
+    let reg = app.registry();
+    let all = what.is_none();
+    let want = |k: &str| all || what == Some(k);
+    let valid = [
+        "tasks",
+        "robots",
+        "shapes",
+        "body-kinds",
+        "terms",
+        "sensors",
+        "plugins",
+    ];
+    if let Some(w) = what {
+        if !valid.contains(&w) {
+            return Err(CliError::input(format!(
+                "list {w}: unknown category; valid: {}",
+                valid.join(", ")
+            )));
+        }
+    }
+    let mut section = |title: &str, items: Vec<(String, String)>| -> Result<(), CliError> {
+        writeln!(out, "{title}:").map_err(io)?;
+        if items.is_empty() {
+            writeln!(out, "  (none in this build)").map_err(io)?;
+        }
+        for (n, d) in items {
+            writeln!(out, "  {n:<28} {d}").map_err(io)?;
+        }
+        Ok(())
+    };
+    if want("tasks") {
+        section("tasks", Vec::new())?;
+    }
+    if want("robots") {
+        section(
+            "robots",
+            reg.robots
+                .values()
+                .map(|r| (r.name.clone(), r.description.clone()))
+                .collect(),
+        )?;
+    }
+    if want("shapes") {
+        let mut items: Vec<(String, String)> = [
+            ("Box", "box; volume mesh: hex grid, 6 tets per hex"),
+            ("Sphere", "sphere (surface)"),
+            ("Cylinder", "cylinder along z; volume mesh: swept disk"),
+            ("Capsule", "capsule along z (surface)"),
+            ("Plane", "static half space z <= 0 (surface: a quad)"),
+            ("Grid", "cloth sheet in the xy plane"),
+            ("Polyline", "a path (used by Sweep)"),
+            ("Revolve", "profile revolved about z: torus, ring; volume mesh"),
+            ("Sweep", "profile swept along a path: belt, tube; volume mesh"),
+            ("Extrude", "polygon extruded along z; volume mesh"),
+            ("Mesh", "OBJ/STL surface, gmsh .msh v4 / medit .mesh volume"),
+        ]
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+        items.extend(
+            reg.shapes
+                .values()
+                .map(|g| (format!("Gen(\"{}\")", g.name()), g.description().to_string())),
+        );
+        section("shapes", items)?;
+    }
+    if want("body-kinds") {
+        let mut items: Vec<(String, String)> = vec![
+            ("Static".into(), "rigid, never moves".into()),
+            ("Dynamic".into(), "rigid, simulated (rapier)".into()),
+            ("Kinematic".into(), "rigid, moved by the program".into()),
+        ];
+        items.extend(
+            reg.body_kinds
+                .values()
+                .map(|k| (k.name().to_string(), k.description().to_string())),
+        );
+        section("body kinds", items)?;
+    }
+    if want("terms") {
+        section(
+            "terms",
+            reg.terms
+                .values()
+                .map(|t| (t.name.clone(), format!("{:?}: {}", t.kind, t.description)))
+                .collect(),
+        )?;
+    }
+    if want("sensors") {
+        section(
+            "sensors",
+            reg.sensors
+                .values()
+                .map(|s| (s.name.clone(), s.description.clone()))
+                .collect(),
+        )?;
+    }
+    if want("plugins") {
+        section(
+            "plugins",
+            app.plugin_names()
+                .into_iter()
+                .map(|n| (n, String::new()))
+                .collect(),
+        )?;
+    }
+    Ok(())
+}
+
+fn compile_file(path: &Path) -> Result<(std::sync::Arc<SceneModel>, SimApp), CliError> {
+    let (desc, source) = scene::load_file(path)?;
+    let app = default_app();
+    let model = app.compile_scene(&desc, &source)?;
+    Ok((model, app))
+}
+
+fn validate(files: &[PathBuf], out: &mut dyn Write) -> Result<(), CliError> {
+    for f in files {
+        let (model, _) = compile_file(f)?;
+        writeln!(
+            out,
+            "{}: ok ({} objects, dt {} s x {} substeps, decimation {})",
+            f.display(),
+            model.objects.len(),
+            model.settings.dt,
+            model.settings.substeps,
+            model.settings.decimation
+        )
+        .map_err(io)?;
+    }
+    Ok(())
+}
+
+fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    if !args.plugin.is_empty() {
+        return Err(CliError::input(
+            "--plugin: loading compiled plugins is not implemented yet (the plugin ABI issue adds it)",
+        ));
+    }
+    let path = Path::new(&args.target);
+    if path.is_file() {
+        let (desc, source) = scene::load_file(path)?;
+        return run_scene(&desc, &source, args, out);
+    }
+    if args.target.starts_with("MoDe-") {
+        return Err(CliError::input(format!(
+            "{}: the MoDeSuite task environments are not implemented yet (they arrive with the tasks plugin); run a scene file instead, e.g. {}",
+            args.target,
+            crate::DEFAULT_SCENE_NAME
+        )));
+    }
+    Err(CliError::input(format!(
+        "{}: no such scene file, and not a task id (MoDe-<Robot>-<Task>-v0)",
+        args.target
+    )))
+}
+
+/// A one-line progress bar on stderr when it is a terminal.
+struct Progress {
+    total: u64,
+    enabled: bool,
+    last_pct: u64,
+}
+
+impl Progress {
+    fn new(total: u64) -> Self {
+        Self {
+            total,
+            enabled: total >= 2000 && std::io::stderr().is_terminal(),
+            last_pct: u64::MAX,
+        }
+    }
+    fn update(&mut self, done: u64) {
+        if !self.enabled {
+            return;
+        }
+        let pct = done * 100 / self.total.max(1);
+        if pct != self.last_pct {
+            self.last_pct = pct;
+            let filled = (pct / 4) as usize;
+            eprint!(
+                "\r[{}{}] {pct:3}% ({done}/{})",
+                "#".repeat(filled),
+                " ".repeat(25 - filled),
+                self.total
+            );
+        }
+    }
+    fn finish(&self) {
+        if self.enabled {
+            eprintln!();
+        }
+    }
+}
+
+fn run_scene(
+    desc: &SceneDesc,
+    source: &SceneSource,
+    args: &RunArgs,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    let mut app = default_app();
+    let model = app.compile_scene(desc, source)?;
+    let steps = args.steps.or(model.episode_steps).unwrap_or(600);
+    if steps == 0 {
+        return Err(CliError::input("--steps = 0: must be at least 1"));
+    }
+    if args.episodes == 0 {
+        return Err(CliError::input("--episodes = 0: must be at least 1"));
+    }
+    app.spawn_scene(model)?;
+    let mut env = Env::new(app);
+    // The CLI resets between episodes itself, so the final state stays for --dump-state.
+    env.autoreset = false;
+    let act_dim = env.spaces().action.flat_dim();
+    let zero = vec![0.0f32; act_dim];
+    if !args.json {
+        writeln!(
+            out,
+            "{:>7} {:>12} {:>8} {:>7} {:>9} {:>12}  error",
+            "episode", "return", "success", "steps", "time_s", "steps/s"
+        )
+        .map_err(io)?;
+    }
+    let mut total_steps = 0u64;
+    let mut total_time = 0.0;
+    let mut returns = Vec::new();
+    let mut lengths = Vec::new();
+    let mut successes = Vec::new();
+    let mut errors = 0u64;
+    let mut progress = Progress::new(steps * args.episodes);
+    for ep in 0..args.episodes {
+        let seed = args.seed.wrapping_add(ep);
+        env.reset(Some(seed));
+        let t = Instant::now();
+        let mut ret = 0.0;
+        let mut length = 0;
+        let mut success = None;
+        let mut error = None;
+        for i in 0..steps {
+            let o = env.step(&zero);
+            ret += o.reward;
+            length = i + 1;
+            progress.update(ep * steps + i + 1);
+            if o.terminated || o.truncated {
+                success = o.info.success;
+                error = o.info.error.clone();
+                break;
+            }
+            success = o.info.success;
+        }
+        // The last dumped state is the state after the final step (before any autoreset).
+        if ep + 1 == args.episodes {
+            if let Some(path) = &args.dump_state {
+                dump_final(&mut env, args, seed, length, path)?;
+            }
+        }
+        let wall = t.elapsed().as_secs_f64();
+        total_steps += length;
+        total_time += wall;
+        returns.push(ret);
+        lengths.push(length);
+        if let Some(s) = success {
+            successes.push(s);
+        }
+        if error.is_some() {
+            errors += 1;
+        }
+        let sps = length as f64 / wall.max(1e-12);
+        if args.json {
+            writeln!(
+                out,
+                "{}",
+                json!({"episode": ep, "seed": seed, "return": ret, "length": length,
+                       "success": success, "error": error, "wall_s": wall, "steps_per_s": sps})
+            )
+            .map_err(io)?;
+        } else {
+            writeln!(
+                out,
+                "{:>7} {:>12.4} {:>8} {:>7} {:>9.3} {:>12.0}  {}",
+                ep,
+                ret,
+                success.map_or("-".to_string(), |s| s.to_string()),
+                length,
+                wall,
+                sps,
+                error.as_deref().unwrap_or("")
+            )
+            .map_err(io)?;
+        }
+    }
+    progress.finish();
+    let n = args.episodes as f64;
+    let mean_return = returns.iter().sum::<f64>() / n;
+    let mean_length = lengths.iter().sum::<u64>() as f64 / n;
+    let success_rate = if successes.is_empty() {
+        None
+    } else {
+        Some(successes.iter().filter(|s| **s).count() as f64 / successes.len() as f64)
+    };
+    let sps = total_steps as f64 / total_time.max(1e-12);
+    if args.json {
+        writeln!(
+            out,
+            "{}",
+            json!({"summary": true, "target": args.target, "episodes": args.episodes,
+                   "success_rate": success_rate, "mean_return": mean_return,
+                   "mean_length": mean_length, "errors": errors, "env_steps_per_s": sps})
+        )
+        .map_err(io)?;
+    } else {
+        writeln!(
+            out,
+            "summary: {} episodes, success rate {}, mean return {:.4}, mean length {:.1}, errors {}, {:.0} env steps/s",
+            args.episodes,
+            success_rate.map_or("n/a (no success criterion)".to_string(), |r| format!("{:.1} %", 100.0 * r)),
+            mean_return,
+            mean_length,
+            errors,
+            sps
+        )
+        .map_err(io)?;
+    }
+    Ok(())
+}
+
+fn dump_final(
+    env: &mut Env,
+    args: &RunArgs,
+    seed: u64,
+    length: u64,
+    path: &Path,
+) -> Result<(), CliError> {
+    let mut v = modesuite_engine::dump::dump_state(&env.app.world);
+    v["scene"] = json!(args.target);
+    v["seed"] = json!(seed);
+    v["episode_length"] = json!(length);
+    let text = serde_json::to_string_pretty(&v)
+        .map_err(|e| CliError::runtime(format!("dump: {e}")))?;
+    std::fs::write(path, text)
+        .map_err(|e| CliError::runtime(format!("{}: cannot write: {e}", path.display())))
+}
+
+fn bench(
+    name: &str,
+    json_out: bool,
+    scale: f64,
+    threads: usize,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(CliError::input(format!(
+            "--scale = {scale}: a finite number > 0"
+        )));
+    }
+    let opts = BenchOptions { scale, threads };
+    let records: Vec<BenchRecord> = match name {
+        "engine" => modesuite_engine::bench::engine_cases(&opts).map_err(CliError::runtime)?,
+        "fem" | "pbd" | "robots" | "render" | "tasks" => {
+            return Err(CliError::input(format!(
+                "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine"
+            )))
+        }
+        other => {
+            return Err(CliError::input(format!(
+                "bench {other}: unknown suite; available: engine"
+            )))
+        }
+    };
+    for r in &records {
+        if json_out {
+            writeln!(out, "{}", r.to_json()).map_err(io)?;
+        }
+    }
+    if !json_out {
+        writeln!(
+            out,
+            "{:<16} {:>5} {:>8} {:>14}  figures",
+            "case", "envs", "threads", "steps/s"
+        )
+        .map_err(io)?;
+        for r in &records {
+            let extra: Vec<String> = r.extra.iter().map(|(k, v)| format!("{k}={v}")).collect();
+            writeln!(
+                out,
+                "{:<16} {:>5} {:>8} {:>14.0}  {}",
+                r.case,
+                r.envs,
+                r.threads,
+                r.steps_per_s,
+                extra.join(" ")
+            )
+            .map_err(io)?;
+        }
+    }
+    Ok(())
+}

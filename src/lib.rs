@@ -1,0 +1,31 @@
+//! # modesuite
+//!
+//! A simulation framework and benchmark for mobile manipulation of deformable objects
+//! (MoDeSuite re-implemented in Rust). This umbrella crate re-exports the workspace crates and
+//! provides [`DefaultPlugins`] and the `modesuite` command-line tool.
+//!
+//! See `ARCHITECTURE.md` for the crate map and the schedule, and the README for the CLI.
+#![warn(missing_docs)]
+
+pub use modesuite_engine as engine;
+pub use modesuite_engine::prelude;
+
+pub mod cli;
+
+use std::sync::Arc;
+
+use modesuite_engine::{Plugin, PluginGroup};
+
+/// Every plugin of the default build, in build order (what the CLI uses).
+pub struct DefaultPlugins;
+
+impl PluginGroup for DefaultPlugins {
+    fn plugins(self) -> Vec<Arc<dyn Plugin>> {
+        modesuite_engine::EnginePlugins.plugins()
+    }
+}
+
+/// The embedded default scene (`modesuite` without arguments runs it).
+pub const DEFAULT_SCENE: &str = include_str!("../scenes/examples/drop.scene.ron");
+/// The file name the embedded default scene is reported under.
+pub const DEFAULT_SCENE_NAME: &str = "scenes/examples/drop.scene.ron";

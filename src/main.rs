@@ -1,0 +1,14 @@
+//! The `modesuite` binary: see `modesuite --help` and the README.
+
+use clap::Parser;
+
+fn main() {
+    let cli = modesuite::cli::Cli::parse();
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    if let Err(e) = modesuite::cli::run_cli(cli, &mut out) {
+        drop(out);
+        eprintln!("error: {}", e.message);
+        std::process::exit(e.code);
+    }
+}
