@@ -222,19 +222,26 @@ fn list(what: Option<&str>, out: &mut dyn Write) -> Result<(), CliError> {
             ("Plane", "static half space z <= 0 (surface: a quad)"),
             ("Grid", "cloth sheet in the xy plane"),
             ("Polyline", "a path (used by Sweep)"),
-            ("Revolve", "profile revolved about z: torus, ring; volume mesh"),
-            ("Sweep", "profile swept along a path: belt, tube; volume mesh"),
+            (
+                "Revolve",
+                "profile revolved about z: torus, ring; volume mesh",
+            ),
+            (
+                "Sweep",
+                "profile swept along a path: belt, tube; volume mesh",
+            ),
             ("Extrude", "polygon extruded along z; volume mesh"),
             ("Mesh", "OBJ/STL surface, gmsh .msh v4 / medit .mesh volume"),
         ]
         .iter()
         .map(|(a, b)| (a.to_string(), b.to_string()))
         .collect();
-        items.extend(
-            reg.shapes
-                .values()
-                .map(|g| (format!("Gen(\"{}\")", g.name()), g.description().to_string())),
-        );
+        items.extend(reg.shapes.values().map(|g| {
+            (
+                format!("Gen(\"{}\")", g.name()),
+                g.description().to_string(),
+            )
+        }));
         section("shapes", items)?;
     }
     if want("body-kinds") {
@@ -509,8 +516,8 @@ fn dump_final(
     v["scene"] = json!(args.target);
     v["seed"] = json!(seed);
     v["episode_length"] = json!(length);
-    let text = serde_json::to_string_pretty(&v)
-        .map_err(|e| CliError::runtime(format!("dump: {e}")))?;
+    let text =
+        serde_json::to_string_pretty(&v).map_err(|e| CliError::runtime(format!("dump: {e}")))?;
     std::fs::write(path, text)
         .map_err(|e| CliError::runtime(format!("{}: cannot write: {e}", path.display())))
 }
@@ -530,11 +537,9 @@ fn bench(
     let opts = BenchOptions { scale, threads };
     let records: Vec<BenchRecord> = match name {
         "engine" => modesuite_engine::bench::engine_cases(&opts).map_err(CliError::runtime)?,
-        "fem" | "pbd" | "robots" | "render" | "tasks" => {
-            return Err(CliError::input(format!(
-                "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine"
-            )))
-        }
+        "fem" | "pbd" | "robots" | "render" | "tasks" => return Err(CliError::input(format!(
+            "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine"
+        ))),
         other => {
             return Err(CliError::input(format!(
                 "bench {other}: unknown suite; available: engine"

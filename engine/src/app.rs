@@ -18,7 +18,7 @@
 use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
-use bevy_ecs::schedule::{ScheduleLabel, SingleThreadedExecutor};
+use bevy_ecs::schedule::{LogLevel, ScheduleLabel, SingleThreadedExecutor};
 
 use crate::registry::Registry;
 use crate::scene::{SceneError, SceneModel};
@@ -79,6 +79,14 @@ pub enum SubstepSystems {
     Couple,
     /// Velocities, finite checks, bookkeeping.
     Finalize,
+}
+
+/// The engine's own systems inside the public sets, for plugins to order against.
+#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+pub enum EngineSystems {
+    /// The time-limit truncation, inside [`EnvSystems::Evaluate`]; termination and reward
+    /// systems that write `StepSignals` order themselves `.before(EngineSystems::TimeLimit)`.
+    TimeLimit,
 }
 
 /// Which pass of [`EnvStep`] is running.
@@ -295,7 +303,8 @@ impl SimApp {
                 .chain()
                 .in_set(EnvSystems::Simulate),
         );
-        env_step.add_systems(crate::scene::time_limit.in_set(EnvSystems::Evaluate));
+        env_step.configure_sets(EngineSystems::TimeLimit.in_set(EnvSystems::Evaluate));
+        env_step.add_systems(crate::scene::time_limit.in_set(EngineSystems::TimeLimit));
         let mut physics = new_schedule(PhysicsStep);
         physics.configure_sets(
             (
@@ -397,7 +406,11 @@ impl SimApp {
 
     /// Declares a resource as part of the env state: it is saved in snapshots, restored on
     /// reset and hashed for determinism checks.
-    pub fn register_stateful<R: Resource + Component<Mutability = bevy_ecs::component::Mutable> + Stateful>(&mut self) -> &mut Self {
+    pub fn register_stateful<
+        R: Resource + Component<Mutability = bevy_ecs::component::Mutable> + Stateful,
+    >(
+        &mut self,
+    ) -> &mut Self {
         self.world
             .resource_mut::<StateRegistry>()
             .add_resource::<R>();
@@ -405,7 +418,9 @@ impl SimApp {
     }
 
     /// Declares a component type as part of the env state (every entity's value is saved).
-    pub fn register_stateful_component<C: Component<Mutability = bevy_ecs::component::Mutable> + Clone + crate::state::HashState>(
+    pub fn register_stateful_component<
+        C: Component<Mutability = bevy_ecs::component::Mutable> + Clone + crate::state::HashState,
+    >(
         &mut self,
     ) -> &mut Self {
         self.world
@@ -425,14 +440,21 @@ impl SimApp {
     }
 
     /// Registers a shape generator under its name (RON: `Gen(name: "...", params: ...)`).
-    pub fn register_shape(&mut self, generator: Arc<dyn crate::registry::ShapeGenerator>) -> &mut Self {
-        self.registry_mut().shapes.insert(generator.name().to_string(), generator);
+    pub fn register_shape(
+        &mut self,
+        generator: Arc<dyn crate::registry::ShapeGenerator>,
+    ) -> &mut Self {
+        self.registry_mut()
+            .shapes
+            .insert(generator.name().to_string(), generator);
         self
     }
 
     /// Registers a body kind (RON: `body: Kind(kind: "fem.solid", params: ...)`).
     pub fn register_body_kind(&mut self, kind: Arc<dyn crate::registry::BodyKind>) -> &mut Self {
-        self.registry_mut().body_kinds.insert(kind.name().to_string(), kind);
+        self.registry_mut()
+            .body_kinds
+            .insert(kind.name().to_string(), kind);
         self
     }
 
@@ -450,7 +472,9 @@ impl SimApp {
 
     /// Registers a sensor type under its name.
     pub fn register_sensor(&mut self, sensor: crate::registry::SensorEntry) -> &mut Self {
-        self.registry_mut().sensors.insert(sensor.name.clone(), sensor);
+        self.registry_mut()
+            .sensors
+            .insert(sensor.name.clone(), sensor);
         self
     }
 
@@ -509,17 +533,27 @@ impl SimApp {
             [EnvStep.intern(), PhysicsStep.intern(), Substep.intern()];
         for label in labels {
             self.world.schedule_scope(label, |world, schedule| {
-                if schedule.initialize(world).is_err() {
-                    out.push(format!("{label:?}: schedule failed to build"));
-                    return;
+                // With ambiguity detection at Error, a build that finds conflicts fails with a
+                // message naming the systems; a schedule built earlier keeps its conflict list.
+                let mut settings = schedule.get_build_settings();
+                let old = settings.ambiguity_detection;
+                settings.ambiguity_detection = LogLevel::Error;
+                schedule.set_build_settings(settings.clone());
+                match schedule.initialize(world) {
+                    Err(e) => out.push(format!(
+                        "{label:?}: {}",
+                        e.to_string(schedule.graph(), world)
+                    )),
+                    Ok(_) => {
+                        for i in 0..schedule.graph().conflicting_systems().len() {
+                            out.push(format!(
+                                "{label:?}: conflict {i} (found when the schedule was first built)"
+                            ));
+                        }
+                    }
                 }
-                let graph = schedule.graph();
-                for (a, b, comps) in graph
-                    .conflicting_systems()
-                    .to_string(graph, world.components())
-                {
-                    out.push(format!("{label:?}: {a} <-> {b} on {comps:?}"));
-                }
+                settings.ambiguity_detection = old;
+                schedule.set_build_settings(settings);
             });
         }
         out

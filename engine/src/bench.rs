@@ -10,7 +10,7 @@ use std::time::Instant;
 use serde_json::{json, Value};
 
 use crate::env::{Env, VecEnv};
-use crate::{SimApp, SceneSource};
+use crate::{SceneSource, SimApp};
 
 /// One measured benchmark case.
 #[derive(Debug, Clone, PartialEq)]
@@ -127,10 +127,7 @@ pub fn engine_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
 
 fn record(case: &str, steps_per_s: f64, threads: usize, envs: usize) -> BenchRecord {
     let mut extra = BTreeMap::new();
-    extra.insert(
-        "us_per_env_step".to_string(),
-        json!(1e6 / steps_per_s),
-    );
+    extra.insert("us_per_env_step".to_string(), json!(1e6 / steps_per_s));
     BenchRecord {
         case: case.to_string(),
         steps_per_s,

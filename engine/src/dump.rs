@@ -25,12 +25,9 @@ fn v3(v: &nalgebra::Vector3<f64>) -> Value {
 /// The state of every object of `world` as a `modesuite.state.v1` JSON value.
 pub fn dump_state(world: &World) -> Value {
     let mut items: Vec<(u32, String, Value)> = Vec::new();
-    if let Some(mut q) = world.try_query::<(
-        &Object,
-        &Pose,
-        Option<&Velocity>,
-        Option<&DeformableNodes>,
-    )>() {
+    if let Some(mut q) =
+        world.try_query::<(&Object, &Pose, Option<&Velocity>, Option<&DeformableNodes>)>()
+    {
         for (obj, pose, vel, nodes) in q.iter(world) {
             let t = pose.0.translation.vector;
             let r = pose.0.rotation.quaternion();
@@ -43,10 +40,7 @@ pub fn dump_state(world: &World) -> Value {
                 m.insert("angular_velocity".into(), v3(&v.angular));
             }
             if let Some(n) = nodes {
-                m.insert(
-                    "nodes".into(),
-                    Value::Array(n.0.iter().map(v3).collect()),
-                );
+                m.insert("nodes".into(), Value::Array(n.0.iter().map(v3).collect()));
             }
             items.push((obj.index, obj.name.clone(), Value::Object(m)));
         }
@@ -56,7 +50,10 @@ pub fn dump_state(world: &World) -> Value {
     for (_, name, v) in items {
         objects.insert(name, v);
     }
-    let clock = world.get_resource::<SimClock>().copied().unwrap_or_default();
+    let clock = world
+        .get_resource::<SimClock>()
+        .copied()
+        .unwrap_or_default();
     json!({
         "format": "modesuite.state.v1",
         "step": clock.episode_steps,

@@ -105,7 +105,9 @@ impl Space {
             Space::Discrete { n } => {
                 let v = x[*offset];
                 if v < 0.0 || v.fract() != 0.0 || (v as u64) >= *n {
-                    return Err(format!("[{offset}] = {v}: a Discrete({n}) value is an integer in 0..{n}"));
+                    return Err(format!(
+                        "[{offset}] = {v}: a Discrete({n}) value is an integer in 0..{n}"
+                    ));
                 }
                 *offset += 1;
             }
@@ -263,7 +265,10 @@ impl Env {
             }
             Err(e) => {
                 // Never reaches the solver: the episode ends here.
-                self.app.world.resource_mut::<SimErrors>().raise(format!("action{e}"));
+                self.app
+                    .world
+                    .resource_mut::<SimErrors>()
+                    .raise(format!("action{e}"));
                 error = Some(format!("action{e}"));
             }
         }
@@ -345,7 +350,9 @@ pub struct VecStep {
 #[derive(Debug, thiserror::Error)]
 pub enum VecEnvError {
     /// The action buffer has the wrong length.
-    #[error("actions: length {got} but {n_envs} envs x {act_dim} action values = {expected} expected")]
+    #[error(
+        "actions: length {got} but {n_envs} envs x {act_dim} action values = {expected} expected"
+    )]
     ActionLength {
         /// Given length.
         got: usize,
@@ -405,7 +412,11 @@ impl VecEnv {
         make: impl Fn(usize) -> Result<SimApp, E>,
     ) -> Result<Self, VecEnvError> {
         let envs = (0..n)
-            .map(|i| make(i).map(Env::new).map_err(|e| VecEnvError::Build(e.to_string())))
+            .map(|i| {
+                make(i)
+                    .map(Env::new)
+                    .map_err(|e| VecEnvError::Build(e.to_string()))
+            })
             .collect::<Result<Vec<_>, _>>()?;
         Self::new(envs, threads)
     }

@@ -42,8 +42,8 @@ pub mod shapes;
 pub mod state;
 
 pub use app::{
-    EnvStep, EnvSystems, Phase, PhysicsStep, PhysicsSystems, Plugin, PluginGroup, Plugins, SimApp,
-    SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
+    EngineSystems, EnvStep, EnvSystems, Phase, PhysicsStep, PhysicsSystems, Plugin, PluginGroup,
+    Plugins, SimApp, SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
 };
 pub use env::{Env, EnvInfo, Space, Spaces, StepOutcome, VecEnv, VecStep};
 pub use rigid::{RigidContext, RigidPlugin, RigidSystems};
@@ -70,8 +70,8 @@ impl PluginGroup for EnginePlugins {
 /// Everything a plugin or scene author usually needs.
 pub mod prelude {
     pub use crate::app::{
-        EnvStep, EnvSystems, Phase, PhysicsStep, PhysicsSystems, Plugin, PluginGroup, SimApp,
-        SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
+        EngineSystems, EnvStep, EnvSystems, Phase, PhysicsStep, PhysicsSystems, Plugin,
+        PluginGroup, SimApp, SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
     };
     pub use crate::components::{DeformableNodes, Object, Pose, Velocity};
     pub use crate::coupling::{ContactQuery, PointContact, Reaction};

@@ -33,7 +33,10 @@ pub fn rot_from_rapier(q: Rotation) -> UnitQuaternion<f64> {
 
 /// nalgebra isometry -> rapier pose.
 pub fn pose_to_rapier(p: &Isometry3<f64>) -> Pose {
-    Pose::from_parts(vec_to_rapier(&p.translation.vector), rot_to_rapier(&p.rotation))
+    Pose::from_parts(
+        vec_to_rapier(&p.translation.vector),
+        rot_to_rapier(&p.rotation),
+    )
 }
 
 /// rapier pose -> nalgebra isometry.
@@ -59,7 +62,9 @@ mod tests {
         let back = pose_from_rapier(&pose_to_rapier(&p));
         let dt = (back.translation.vector - p.translation.vector).norm();
         let dr = back.rotation.angle_to(&p.rotation);
-        println!("pose round trip: translation error {dt:.2e} m, rotation error {dr:.2e} rad (tol 1e-6)");
+        println!(
+            "pose round trip: translation error {dt:.2e} m, rotation error {dr:.2e} rad (tol 1e-6)"
+        );
         assert!(dt < 1e-6 && dr < 1e-6);
     }
 }

@@ -42,7 +42,12 @@ pub trait BodyKind: Send + Sync + 'static {
     /// Parses and validates the object's parameters and builds the immutable compiled body.
     fn compile(&self, ctx: &BodyCompileContext) -> Result<CompiledBody, SceneError>;
     /// Adds the compiled body to an env's world; `entity` already carries `Object` and `Pose`.
-    fn spawn(&self, app: &mut SimApp, entity: Entity, body: &CompiledBody) -> Result<(), SceneError>;
+    fn spawn(
+        &self,
+        app: &mut SimApp,
+        entity: Entity,
+        body: &CompiledBody,
+    ) -> Result<(), SceneError>;
 }
 
 /// A named shape generator (RON: `Gen(name: "acme.trefoil", params: (...))`).
@@ -122,7 +127,12 @@ pub struct Registry {
 }
 
 impl crate::shapes::ShapeGenerators for Registry {
-    fn generate(&self, name: &str, params_ron: &str, want: MeshKind) -> Result<GeneratedMesh, String> {
+    fn generate(
+        &self,
+        name: &str,
+        params_ron: &str,
+        want: MeshKind,
+    ) -> Result<GeneratedMesh, String> {
         match self.shapes.get(name) {
             Some(g) => g.generate(params_ron, want),
             None => Err(format!(

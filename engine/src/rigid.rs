@@ -265,7 +265,9 @@ impl RigidContext {
             let t = b.translation();
             let v = b.linvel();
             if !(t.is_finite() && v.is_finite()) {
-                return Err(format!("rigid body {h:?} has non-finite position or velocity"));
+                return Err(format!(
+                    "rigid body {h:?} has non-finite position or velocity"
+                ));
             }
         }
         Ok(())
@@ -351,12 +353,18 @@ fn collider_builder(shape: &RigidShape) -> ColliderBuilder {
             half_height,
         } => ColliderBuilder::cylinder(*half_height as f32, *radius as f32)
             // parry's cylinder is along y; ours along z.
-            .rotation(rapier3d::math::Vector::new(std::f32::consts::FRAC_PI_2, 0.0, 0.0)),
+            .rotation(rapier3d::math::Vector::new(
+                std::f32::consts::FRAC_PI_2,
+                0.0,
+                0.0,
+            )),
         RigidShape::CapsuleZ {
             radius,
             half_height,
         } => ColliderBuilder::capsule_z(*half_height as f32, *radius as f32),
-        RigidShape::HalfSpace => ColliderBuilder::halfspace(nalgebra::Unit::new_unchecked(rapier3d::math::Vector::Z)),
+        RigidShape::HalfSpace => {
+            ColliderBuilder::halfspace(nalgebra::Unit::new_unchecked(rapier3d::math::Vector::Z))
+        }
         RigidShape::TriMesh(mesh) => {
             let (v, i) = mesh_to_rapier(mesh);
             ColliderBuilder::trimesh(v, i).unwrap_or_else(|_| ColliderBuilder::ball(1e-3))

@@ -85,20 +85,28 @@ pub struct StateRegistry {
     entries: Vec<StateEntry>,
 }
 
-fn save_resource<R: Resource + Component<Mutability = Mutable> + Stateful>(world: &World) -> Box<dyn Any + Send + Sync> {
+fn save_resource<R: Resource + Component<Mutability = Mutable> + Stateful>(
+    world: &World,
+) -> Box<dyn Any + Send + Sync> {
     match world.get_resource::<R>() {
         Some(r) => r.save_state(),
         None => Box::new(()),
     }
 }
 
-fn load_resource<R: Resource + Component<Mutability = Mutable> + Stateful>(world: &mut World, s: &(dyn Any + Send + Sync)) {
+fn load_resource<R: Resource + Component<Mutability = Mutable> + Stateful>(
+    world: &mut World,
+    s: &(dyn Any + Send + Sync),
+) {
     if let Some(mut r) = world.get_resource_mut::<R>() {
         r.load_state(s);
     }
 }
 
-fn hash_resource<R: Resource + Component<Mutability = Mutable> + Stateful>(world: &World, h: &mut StateHasher) {
+fn hash_resource<R: Resource + Component<Mutability = Mutable> + Stateful>(
+    world: &World,
+    h: &mut StateHasher,
+) {
     if let Some(r) = world.get_resource::<R>() {
         r.hash_state(h);
     }
@@ -183,7 +191,11 @@ impl Snapshot {
     pub fn take(world: &World) -> Self {
         let reg = world.resource::<StateRegistry>();
         Self {
-            parts: reg.entries.iter().map(|e| (e.name, (e.save)(world))).collect(),
+            parts: reg
+                .entries
+                .iter()
+                .map(|e| (e.name, (e.save)(world)))
+                .collect(),
         }
     }
 

@@ -38,7 +38,11 @@ pub enum SceneError {
 
 impl SceneError {
     /// A semantic error without a file (the compiler adds the file).
-    pub fn semantic(path: impl Into<String>, value: impl Into<String>, expected: impl Into<String>) -> Self {
+    pub fn semantic(
+        path: impl Into<String>,
+        value: impl Into<String>,
+        expected: impl Into<String>,
+    ) -> Self {
         Self::Semantic {
             file: None,
             path: path.into(),

@@ -346,7 +346,9 @@ fn rigid_shape(
             RigidShape::HalfSpace
         }
         other => {
-            let mesh = other.surface(ctx).map_err(|e| shape_err(&format!("{path}.shape"), e))?;
+            let mesh = other
+                .surface(ctx)
+                .map_err(|e| shape_err(&format!("{path}.shape"), e))?;
             if mesh.triangles.is_empty() {
                 return Err(SceneError::semantic(
                     format!("{path}.shape"),
@@ -410,12 +412,20 @@ pub fn plugin_params_error(
 }
 
 /// Validates and compiles a scene description with the given registries.
-pub fn compile(desc: &SceneDesc, source: &SceneSource, registry: &Registry) -> Result<SceneModel, SceneError> {
+pub fn compile(
+    desc: &SceneDesc,
+    source: &SceneSource,
+    registry: &Registry,
+) -> Result<SceneModel, SceneError> {
     let file = source.file.as_ref().map(|f| f.display().to_string());
     compile_inner(desc, source, registry).map_err(|e| e.in_file(file.as_deref()))
 }
 
-fn compile_inner(desc: &SceneDesc, source: &SceneSource, registry: &Registry) -> Result<SceneModel, SceneError> {
+fn compile_inner(
+    desc: &SceneDesc,
+    source: &SceneSource,
+    registry: &Registry,
+) -> Result<SceneModel, SceneError> {
     validate_physics(&desc.physics)?;
     let mut materials = desc.materials.clone();
     materials.entry("default".to_string()).or_default();
@@ -467,7 +477,10 @@ fn compile_inner(desc: &SceneDesc, source: &SceneSource, registry: &Registry) ->
             .validate()
             .map_err(|e| shape_err(&format!("{path}.shape"), e))?;
         validate_pose(&format!("{path}.pose"), &obj.pose)?;
-        let material_name = obj.material.clone().unwrap_or_else(|| "default".to_string());
+        let material_name = obj
+            .material
+            .clone()
+            .unwrap_or_else(|| "default".to_string());
         let material = *materials.get(&material_name).ok_or_else(|| {
             SceneError::semantic(
                 format!("{path}.material"),

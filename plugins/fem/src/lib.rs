@@ -15,11 +15,36 @@
 //! | [`sparse`] | block-CSR matrix, RCM ordering, profile Cholesky, filtered PCG |
 //! | [`solid`] | [`FemSolid`]: state arrays, constraints, grasps, contact, time step, snapshots |
 //! | [`coupling`] | [`ContactQuery`], [`PointContact`], [`Reaction`]: the rigid-coupling interface |
-//! | [`bench`] | the reference-rod benchmark helpers |
+//! | [`bench`](mod@bench) | the reference-rod benchmark helpers |
 //! | [`testing`] | tiny Kuhn box mesher for tests and benchmarks |
 //!
 //! Why 10-node elements: linear tetrahedra lock in bending (a coarse rod is 5-10x too stiff);
-//! quadratic ones reach a few percent of beam theory with one element through the thickness.
+//! quadratic ones reach a few percent of beam theory with one element through the thickness
+//! (reference rod, linear static: 0.974 / 0.987 / 0.995 of Euler-Bernoulli on Kuhn 10x1x1 /
+//! 20x1x1 / 40x2x2 grids, `tests/validation.rs`).
+//!
+//! ## API in one screen
+//!
+//! - Build: [`FemSolid::new`]`(nodes, tets, Material, FemConfig)` from a positively oriented
+//!   linear tet mesh; the edge nodes are added (corners keep their indices, edge nodes follow).
+//! - Step: [`FemSolid::step`]`(dt, gravity, &dyn ContactQuery, &mut Vec<Reaction>)
+//!   -> Result<StepStats, FemError>`; statics: [`FemSolid::solve_static`],
+//!   [`FemSolid::solve_linear_static`].
+//! - Constraints: [`FemSolid::fix_nodes`], [`FemSolid::constrain_nodes_along`] (rollers),
+//!   [`FemSolid::set_constraint_target`], [`FemSolid::release_nodes`]; kinematic attachment to a
+//!   rigid frame [`FemSolid::attach_to_body`] / [`FemSolid::detach`], frames moved with
+//!   [`FemSolid::set_body_pose`] before each step; grasps [`FemSolid::grasp`] (stiffness, force
+//!   limit past which it slips) / [`FemSolid::release_grasp`] / [`FemSolid::grasp_info`].
+//! - Coupling out: reactions (impulses on rigid bodies) from attachments, grasps and contacts;
+//!   [`FemSolid::constraint_forces`] per constrained node.
+//! - Derived quantities: [`FemSolid::positions`], [`FemSolid::velocities`], tracked points
+//!   ([`FemSolid::embed_point`], [`FemSolid::embed_line`], [`FemSolid::embedded_position`]),
+//!   [`FemSolid::green_strains`], [`FemSolid::max_strain`], [`FemSolid::elastic_energy`],
+//!   [`FemSolid::kinetic_energy`], [`FemSolid::volume`], [`FemSolid::inverted_count`].
+//! - Snapshots: [`FemSolid::get_state`] / [`FemSolid::set_state`] (bit-exact, including
+//!   velocities, constraints, attachments, grasps and the preconditioner reference shape).
+//! - Errors: every failure is a [`FemError`]; a step that produces non-finite values or exceeds
+//!   `FemConfig::max_speed` is rolled back and reported as [`FemError::Exploded`].
 //!
 //! ## Use
 //!

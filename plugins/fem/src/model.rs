@@ -141,8 +141,13 @@ impl SolidModel {
         f
     }
 
-    /// Elastic energy only (J) and inverted quadrature-point count.
-    pub fn energy_only(&self, x: &[Vector3<f64>]) -> KernelStats {
+    /// Elastic energy only (J) and inverted quadrature-point count; with `damping`, the
+    /// strain-rate damping potential (see [`SolidModel::eval`]) is included in the energy.
+    pub fn energy_only(
+        &self,
+        x: &[Vector3<f64>],
+        damping: Option<(&[Vector3<f64>], f64)>,
+    ) -> KernelStats {
         let mut s = KernelStats::default();
         for e in 0..self.n_elements() {
             for q in 0..NQ {
@@ -150,21 +155,66 @@ impl SolidModel {
                 if f.determinant() <= 0.0 {
                     s.inverted += 1;
                 }
-                s.energy += self.qp_weight[e * NQ + q] * self.energy.energy(&f);
+                let w = self.qp_weight[e * NQ + q];
+                s.energy += w * self.energy.energy(&f);
+                if let Some((xp, c)) = damping {
+                    let fp = self.deformation_gradient(e, q, xp);
+                    s.energy += w * self.damping_qp(&f, &fp, c, false).0;
+                }
             }
         }
         s
     }
 
+    /// Strain-rate (stiffness-proportional) damping potential density at one quadrature point:
+    /// `c/2 dE : C : dE` with `dE = E(F) - E(F_prev)` the Green strain increment and `C` the
+    /// small-strain isotropic elasticity tensor (`lambda_L`, `mu_L`); with `c = b / dt` it is
+    /// Rayleigh's `b K` at small strain but exactly invariant to rigid rotation (a linear `b K`
+    /// damps the second-order chord of a rotation). Returns the energy density, `dD/dF` and, when
+    /// asked, its Gauss-Newton (positive semi-definite) derivative.
+    pub fn damping_qp(
+        &self,
+        f: &Matrix3<f64>,
+        f_prev: &Matrix3<f64>,
+        c: f64,
+        hess: bool,
+    ) -> (f64, Matrix3<f64>, Option<SMatrix<f64, 9, 9>>) {
+        let (mu, lambda) = self.energy.small_strain_lame();
+        let de = (f.transpose() * f - f_prev.transpose() * f_prev) * 0.5;
+        let tr = de.trace();
+        let stress = Matrix3::identity() * (lambda * tr) + de * (2.0 * mu);
+        let energy = 0.5 * c * (lambda * tr * tr + 2.0 * mu * de.norm_squared());
+        let p = f * stress * c;
+        let h = hess.then(|| {
+            let mut h = SMatrix::<f64, 9, 9>::zeros();
+            for k in 0..9 {
+                let mut df = Matrix3::zeros();
+                df.as_mut_slice()[k] = 1.0;
+                let ftdf = f.transpose() * df;
+                let d_e = (ftdf + ftdf.transpose()) * 0.5;
+                let ds = Matrix3::identity() * (lambda * d_e.trace()) + d_e * (2.0 * mu);
+                let dp = f * ds * c;
+                for r in 0..9 {
+                    h[(r, k)] = dp.as_slice()[r];
+                }
+            }
+            h
+        });
+        (energy, p, h)
+    }
+
     /// Elastic energy, gradient `dPsi/dx` (N, written into `grad`) and, if `hess` is given, the
     /// stiffness matrix (block values overwritten); with `project`, each quadrature point's
-    /// `dP/dF` is first made positive semi-definite ([`project_psd`]).
+    /// `dP/dF` is first made positive semi-definite ([`project_psd`]). With
+    /// `damping = Some((x_prev, c))` the strain-rate damping potential of
+    /// [`SolidModel::damping_qp`] (relative to the shape `x_prev`) is added to all three.
     pub fn eval(
         &self,
         x: &[Vector3<f64>],
         grad: &mut [Vector3<f64>],
         mut hess: Option<&mut [Matrix3<f64>]>,
         project: bool,
+        damping: Option<(&[Vector3<f64>], f64)>,
     ) -> KernelStats {
         grad.iter_mut().for_each(|g| *g = Vector3::zeros());
         if let Some(h) = hess.as_deref_mut() {
@@ -185,10 +235,24 @@ impl SolidModel {
                 if f.determinant() <= 0.0 {
                     s.inverted += 1;
                 }
+                let fp = damping.map(|(xp, _)| {
+                    let mut fp = Matrix3::zeros();
+                    for a in 0..10 {
+                        fp += xp[el[a] as usize] * g[a].transpose();
+                    }
+                    fp
+                });
                 if hess.is_some() {
-                    let (psi, p, h) = self.energy.eval(&f);
+                    let (mut psi, mut p, h) = self.energy.eval(&f);
+                    let mut h = if project { project_psd(&h) } else { h };
+                    if let (Some(fp), Some((_, c))) = (fp, damping) {
+                        let (ed, pd, hd) = self.damping_qp(&f, &fp, c, true);
+                        psi += ed;
+                        p += pd;
+                        h += hd.expect("requested");
+                    }
                     s.energy += w * psi;
-                    let h = if project { project_psd(&h) * w } else { h * w };
+                    let h = h * w;
                     for a in 0..10 {
                         ge[a] += p * g[a] * w;
                     }
@@ -219,7 +283,12 @@ impl SolidModel {
                     }
                 } else {
                     s.energy += w * self.energy.energy(&f);
-                    let p = self.energy.pk1(&f);
+                    let mut p = self.energy.pk1(&f);
+                    if let (Some(fp), Some((_, c))) = (fp, damping) {
+                        let (ed, pd, _) = self.damping_qp(&f, &fp, c, false);
+                        s.energy += w * ed;
+                        p += pd;
+                    }
                     for a in 0..10 {
                         ge[a] += p * g[a] * w;
                     }

@@ -216,18 +216,28 @@ pub struct Cloth {
     adj: Vec<(u32, f64)>,
 
     // ---- attachments
+    /// `(f)` frames (poses set by the caller each step).
     frames: Vec<Frame>,
+    /// Pins, frame attachments and grasps, in creation order.
     attachments: Vec<Attachment>,
+    /// Id the next attachment gets.
     next_attachment: u32,
     /// `(f)` scratch: frame poses at the end of the current substep.
     frame_now: Vec<Isometry3<f64>>,
 
-    // ---- rigid contacts of the current step (SoA)
+    // ---- rigid contacts of the current step (SoA, `(c)` entries, in particle order except for
+    // the re-queried ones appended during the step)
+    /// Particle of each contact.
     c_particle: Vec<u32>,
+    /// `(c, 3)` plane point at the start of the step, world frame, m (it moves with `c_vel`).
     c_point: Vec<Vector3<f64>>,
+    /// `(c, 3)` unit outward normal, world frame.
     c_normal: Vec<Vector3<f64>>,
+    /// `(c, 3)` collider surface velocity, world frame, m/s.
     c_vel: Vec<Vector3<f64>>,
+    /// `(c)` combined friction coefficient.
     c_mu: Vec<f64>,
+    /// `(c)` rigid body id (`u32::MAX`: none).
     c_body: Vec<u32>,
     /// Normal correction accumulated in the current substep, m.
     c_dn: Vec<f64>,
@@ -245,6 +255,10 @@ pub struct Cloth {
     /// Friction coefficient and normal correction of the current substep, m.
     e_mu: Vec<f64>,
     e_dn: Vec<f64>,
+    /// `(n, 3)` position where each particle's colliders were last queried, m, and `(n)` how
+    /// far it may move from there before they are queried again, m.
+    guard_origin: Vec<Vector3<f64>>,
+    guard_radius: Vec<f64>,
     /// `(n + 1)` scratch: start of each particle's contacts in the contact arrays.
     contact_start: Vec<u32>,
 
@@ -503,6 +517,8 @@ impl Cloth {
             e_mu: Vec::new(),
             e_dn: Vec::new(),
             contact_start: vec![0; n + 1],
+            guard_origin: positions.to_vec(),
+            guard_radius: vec![0.0; n],
             selfc: SelfCollision::new(positions, triangles),
             groups: BTreeMap::new(),
         })
@@ -1108,6 +1124,57 @@ impl Cloth {
         }
     }
 
+    /// Appends the contacts in `query_buf` (queried at time `t_query` into the step) for
+    /// particle `i`, validated; stores the plane point at the start of the step.
+    fn push_queried(&mut self, i: usize, t_query: f64) -> Result<(), PbdError> {
+        for k in 0..self.query_buf.len() {
+            let c = self.query_buf[k];
+            let ok = finite3(&c.point)
+                && finite3(&c.normal)
+                && finite3(&c.velocity)
+                && c.friction.is_finite()
+                && c.friction >= 0.0
+                && c.distance.is_finite();
+            let nn = c.normal.norm();
+            if !ok || nn.is_nan() || nn <= 0.5 {
+                return Err(PbdError::NonFiniteContact { particle: i });
+            }
+            self.c_particle.push(i as u32);
+            self.c_point.push(c.point - c.velocity * t_query);
+            self.c_normal.push(c.normal / nn);
+            self.c_vel.push(c.velocity);
+            self.c_mu.push((self.material.friction * c.friction).sqrt());
+            self.c_body.push(c.body);
+            self.c_dn.push(0.0);
+            self.c_impulse.push(Vector3::zeros());
+        }
+        Ok(())
+    }
+
+    /// Conservative guard against tunnelling: a particle that constraint corrections moved
+    /// farther from where its colliders were last queried than that query's radius is queried
+    /// again from its position at the start of the substep (outside the colliders), and the new
+    /// planes are enforced before the substep ends.
+    fn requery_moved(&mut self, query: &dyn ContactQuery, t_start: f64) -> Result<(), PbdError> {
+        let half = 0.5 * self.material.thickness;
+        for i in 0..self.pos.len() {
+            let g = self.guard_radius[i];
+            if self.inv_mass[i] == 0.0
+                || (self.pos[i] - self.guard_origin[i]).norm_squared() <= g * g
+            {
+                continue;
+            }
+            let from = self.prev[i];
+            let r = half + (self.pos[i] - from).norm() + self.settings.contact_margin;
+            self.query_buf.clear();
+            query.contacts_near(&from, r, &mut self.query_buf);
+            self.push_queried(i, t_start)?;
+            self.guard_origin[i] = from;
+            self.guard_radius[i] = r - half;
+        }
+        Ok(())
+    }
+
     fn gather_contacts(
         &mut self,
         dt: f64,
@@ -1120,6 +1187,8 @@ impl Cloth {
         self.c_vel.clear();
         self.c_mu.clear();
         self.c_body.clear();
+        self.c_dn.clear();
+        self.c_impulse.clear();
         let half = 0.5 * self.material.thickness;
         let gdt = gravity.norm() * dt;
         for i in 0..self.pos.len() {
@@ -1128,30 +1197,12 @@ impl Cloth {
             let r = half + (self.vel[i].norm() + gdt) * dt + self.settings.contact_margin;
             self.query_buf.clear();
             query.contacts_near(&self.pos[i], r, &mut self.query_buf);
-            for c in &self.query_buf {
-                let ok = finite3(&c.point)
-                    && finite3(&c.normal)
-                    && finite3(&c.velocity)
-                    && c.friction.is_finite()
-                    && c.friction >= 0.0
-                    && c.distance.is_finite();
-                let nn = c.normal.norm();
-                if !ok || nn.is_nan() || nn <= 0.5 {
-                    return Err(PbdError::NonFiniteContact { particle: i });
-                }
-                self.c_particle.push(i as u32);
-                self.c_point.push(c.point);
-                self.c_normal.push(c.normal / nn);
-                self.c_vel.push(c.velocity);
-                self.c_mu.push((self.material.friction * c.friction).sqrt());
-                self.c_body.push(c.body);
-            }
+            self.push_queried(i, 0.0)?;
+            self.guard_origin[i] = self.pos[i];
+            self.guard_radius[i] = r - half;
         }
         let m = self.c_particle.len();
-        self.c_dn.clear();
-        self.c_dn.resize(m, 0.0);
-        self.c_impulse.clear();
-        self.c_impulse.resize(m, Vector3::zeros());
+        debug_assert_eq!(self.c_dn.len(), m);
         // midpoints of the mesh edges next to a touching particle
         self.e_edge.clear();
         self.e_point.clear();
@@ -1231,12 +1282,10 @@ impl Cloth {
         if self.settings.self_collision && !self.triangles.is_empty() {
             self_pairs = self.selfc.gather(
                 &self.pos,
-                &self.vel,
                 &self.rest,
                 &self.triangles,
                 self.material.thickness,
                 self.settings.self_collision_margin,
-                dt,
             );
         }
         for a in &mut self.attachments {
@@ -1311,6 +1360,7 @@ impl Cloth {
                 self.solve_edge_contacts(t_end, half, h);
                 self.solve_contacts_normal(t_end, half);
             }
+            self.requery_moved(query, s as f64 * h)?;
             self.apply_edge_friction(h);
             self.apply_friction(h);
             // friction of one contact may push a particle into another contact's plane

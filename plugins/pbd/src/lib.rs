@@ -29,10 +29,10 @@
 //!   reference-sheet benchmark of the peer harness.
 //!
 //! ## Choices and their measured reasons
-//! * **f64 particle arrays.** The converged hanging-chain test reaches 1e-13 relative error in
-//!   f64; the solver's time is dominated by gather/scatter latency rather than arithmetic width,
-//!   so f32 would mainly buy memory bandwidth that a 1600-particle sheet (38 KB of positions) does
-//!   not need.
+//! * **f64 particle arrays** (an f32 variant was not built or measured). The converged
+//!   hanging-chain test reaches 1e-13 relative error in f64; profiles show the time going to
+//!   gather/scatter and sqrt/division latency rather than memory bandwidth (a 1600-particle
+//!   sheet's positions are 38 KB), which f32 would only partly help.
 //! * **Gauss-Seidel in colour order**, one iteration per substep by default (8 substeps per
 //!   1/60 s step): constraints of one colour share no particle, so distance constraints are
 //!   processed four at a time. Under-iterated XPBD is always softer than converged, never
@@ -40,11 +40,15 @@
 //!   80 per frame).
 //! * **Tethers only from kinematic pins**: a force-limited attachment must feel the cloth's load
 //!   through the constraints; tethers to it made the grip force wrong (measured).
-//! * **Edge contacts off by default**: on, they stop mesh edges from cutting box corners (where
-//!   friction otherwise locks a particle and leaves its edge stretched by 25 % or more in the
-//!   reference scene), but their stronger corrections let one particle of the reference sheet
-//!   pass 5 mm into the cube during the fast swing, and they change coarse drapes by more than
-//!   the 0.02 refinement tolerance.
+//! * **Contacts are queried once per step** (one `contacts_near` call per particle), plus a
+//!   guard: a particle that constraint corrections carry farther than its query radius is
+//!   queried again within the step. Without the guard, one particle of the reference sheet
+//!   ended 7 mm inside the cube when edge contacts yanked it around a corner.
+//! * **Edge contacts off by default**: on, they stop mesh edges from cutting box corners, where
+//!   friction otherwise locks a particle and leaves its edges stretched (max strain 25.8 % at 8
+//!   substeps in the reference scene; 11 % with edge contacts), but they also change coarse
+//!   drapes over the disc rim (Cusick 21 -> 31 particles per side: change 0.027, beyond the 0.02
+//!   tolerance, versus 0.006 without).
 //!
 //! ## Errors
 //! Non-finite results never propagate: a step that produces one is rolled back and returns

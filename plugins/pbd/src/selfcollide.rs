@@ -93,17 +93,15 @@ impl SelfCollision {
         }
     }
 
-    /// Gathers the candidates of this step; returns their number.
-    #[allow(clippy::too_many_arguments)]
+    /// Gathers the candidates of this step from the positions at its start; returns their
+    /// number.
     pub(crate) fn gather(
         &mut self,
         pos: &[Vector3<f64>],
-        _vel: &[Vector3<f64>],
         rest: &[Vector3<f64>],
         tris: &[[u32; 3]],
         thickness: f64,
         margin: f64,
-        _dt: f64,
     ) -> usize {
         let n = pos.len();
         self.pt_particle.clear();

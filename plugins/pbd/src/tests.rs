@@ -419,3 +419,72 @@ fn edge_contacts_keep_edges_out_of_box_corners() {
     assert!(with >= 0.0);
     assert!(without < with);
 }
+
+#[test]
+fn task_cloths_build_and_step() {
+    // Uncover: 1.6 x 1.2 m, 41 x 31, 0.2 kg/m^2, handle at the middle of the near edge
+    let cover = GridSheet::new(1.6, 1.2, 41, 31, Vector3::new(-0.8, -0.6, 0.6)).unwrap();
+    let mut uncover = Cloth::new(
+        &cover.positions,
+        &cover.triangles,
+        ClothMaterial::default(),
+        SolverSettings::default(),
+    )
+    .unwrap();
+    uncover.add_group("handle", &[cover.index(20, 0)]).unwrap();
+    // Cover: 0.8 x 0.6 m, 33 x 25, handle at a corner
+    let small = GridSheet::new(0.8, 0.6, 33, 25, Vector3::new(0.0, 0.0, 0.8)).unwrap();
+    let mut cov = Cloth::new(
+        &small.positions,
+        &small.triangles,
+        ClothMaterial::default(),
+        SolverSettings::default(),
+    )
+    .unwrap();
+    cov.add_group("handle", &[small.index(0, 0)]).unwrap();
+    // Curtain: 0.9 x 1.0 m, 51 x 51, 0.4 kg/m^2, top edge fixed for 0.2 m at each side
+    let flat = GridSheet::new(0.9, 1.0, 51, 51, Vector3::zeros()).unwrap();
+    let hanging: Vec<Vector3<f64>> = flat
+        .positions
+        .iter()
+        .map(|p| Vector3::new(p.x, 0.0, 2.0 - p.y))
+        .collect();
+    let material = ClothMaterial {
+        areal_density: 0.4,
+        ..ClothMaterial::default()
+    };
+    let mut curtain = Cloth::new(
+        &hanging,
+        &flat.triangles,
+        material,
+        SolverSettings::default(),
+    )
+    .unwrap();
+    let fixed: Vec<u32> = (0..51)
+        .filter(|&i| {
+            let x = 0.9 * i as f64 / 50.0;
+            x <= 0.2 + 1e-9 || x >= 0.7 - 1e-9
+        })
+        .map(|i| flat.index(i, 0))
+        .collect();
+    assert_eq!(fixed.len(), 24);
+    curtain.pin_to_world(&fixed).unwrap();
+    assert!((curtain.total_mass() - 0.36).abs() < 1e-12);
+    let table = AnalyticColliders::new(vec![AnalyticCollider::fixed(
+        Shape::Box {
+            pose: Isometry3::translation(0.0, 0.0, 0.25),
+            half_extents: Vector3::new(1.0, 0.5, 0.25),
+        },
+        0.5,
+    )]);
+    let h = uncover.group_positions("handle").unwrap()[0];
+    assert!((h.x - 0.0).abs() < 1e-9 && (h.y + 0.6).abs() < 1e-9);
+    let mut r = Vec::new();
+    for c in [&mut uncover, &mut cov, &mut curtain] {
+        for _ in 0..10 {
+            c.step(1.0 / 60.0, &gravity(), &table, &mut r).unwrap();
+        }
+        assert!(c.positions().iter().all(|p| p.z.is_finite()));
+    }
+    assert!(curtain.positions()[fixed[0] as usize] == hanging[fixed[0] as usize]);
+}

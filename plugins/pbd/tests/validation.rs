@@ -402,3 +402,24 @@ fn grasp_holds_below_the_limit_and_slips_above() {
     println!("grasp slip under a ramped load: slips at {slip:.5} N, limit {limit:.5} N, rel err {err:.2e} (tolerance 0.05)");
     assert!(err <= 0.05);
 }
+
+#[test]
+fn reference_sheet_targets_mean_stretch_and_no_particle_in_the_cube() {
+    // physics targets of the benchmark (speed is measured by the example, never asserted)
+    let cfg = bench::BenchConfig {
+        steps: 570,
+        ..bench::BenchConfig::reference(true)
+    };
+    let r = bench::run_reference_checked(&cfg).unwrap();
+    println!(
+        "reference sheet with self-collision, {} steps: mean stretch {:.3} % (target <= 1 %), max {:.2} %, particles > 5 mm inside the cube: {} at the end, {} at worst (target 0)",
+        r.steps,
+        100.0 * r.stretch.mean,
+        100.0 * r.stretch.max,
+        r.inside_cube,
+        r.max_inside_cube
+    );
+    assert!(r.stretch.mean <= 0.01);
+    assert_eq!(r.max_inside_cube, 0);
+    assert!(r.contacts > 0, "the sheet should lie on the cube");
+}

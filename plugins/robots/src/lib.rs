@@ -1,7 +1,30 @@
 //! # modesuite-robots
 //!
-//! Robots for modesuite: URDF loading into rapier multibodies, the Franka-on-Ridgeback and
-//! Spot-with-arm models, joint/IK/base/legged controllers and the robot registry.
+//! Robots for modesuite: URDF loading into rapier multibodies (reduced coordinates), the
+//! project's Franka-on-Ridgeback and Spot-with-arm models, joint PD control with gravity
+//! compensation, holonomic base velocity control and damped-least-squares inverse kinematics.
 //!
-//! Status: empty. The engine foundation landed first; this crate is filled by the robots issue.
-//! Nothing here is registered yet, so `modesuite list robots` shows none.
+//! - [`urdf`]: asset search path (`package://` without ROS, refusing paths that escape the asset
+//!   roots), parsing (urdf-rs, guarded against panics) and validation into a [`UrdfModel`].
+//! - [`robot`]: [`spawn_robot`] builds a model into a `RigidContext`; [`Robot`] reads and sets
+//!   joint positions and frame poses.
+//! - [`control`]: [`JointController`] (position/velocity motors + gravity feed-forward),
+//!   [`HolonomicBase`].
+//! - [`ik`]: [`solve_ik`], [`forward_kinematics`].
+//! - [`models`]: [`RobotSpec`] of `franka` and `spot` (files, joint groups, home poses).
+//!
+//! Not registered with the engine yet: no plugin, no scene section, no actions.
+
+pub mod control;
+pub mod error;
+pub mod ik;
+pub mod models;
+pub mod robot;
+pub mod urdf;
+
+pub use control::{BaseVelocity, HolonomicBase, JointCommand, JointController, JointGains};
+pub use error::RobotError;
+pub use ik::{forward_kinematics, solve_ik, IkOptions, IkSolution};
+pub use models::{RobotKind, RobotSpec};
+pub use robot::{spawn_robot, Robot, RobotBody, RobotFrame, RobotJoint, RootMount, SpawnOptions};
+pub use urdf::{read_urdf, AssetPaths, UrdfModel};

@@ -1,0 +1,201 @@
+//! Damped-least-squares inverse kinematics over a robot's kinematic branch, with joint limits.
+//!
+//! Each iteration runs forward kinematics of the branch (rapier's `forward_kinematics_single_branch`
+//! through `Multibody::inverse_kinematics` with one iteration), takes one damped-least-squares
+//! step `dq = J^T (J J^T + lambda^2 I)^-1 e` on the pose error e (position and rotation vector),
+//! and clamps the result to the joint limits. Nothing in the physics state changes: the solution
+//! is returned as joint positions.
+
+use modesuite_engine::deps::nalgebra::Isometry3;
+use modesuite_engine::deps::rapier3d::math::DVector;
+use modesuite_engine::deps::rapier3d::prelude::{InverseKinematicsOption, JointAxesMask};
+use modesuite_engine::math::{pose_from_rapier, pose_to_rapier};
+use modesuite_engine::RigidContext;
+
+use crate::error::RobotError;
+use crate::robot::Robot;
+
+/// Options of [`solve_ik`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IkOptions {
+    /// Iterations (rapier's default of 10 is too few; 100 converges to < 1 mm).
+    pub iterations: usize,
+    /// Damping lambda of the least-squares step (m or rad).
+    pub damping: f64,
+    /// Stop once the position error is below this, m (and the angle error below `tol_angle`).
+    pub tol_position: f64,
+    /// Stop once the angle error is below this, rad.
+    pub tol_angle: f64,
+}
+
+impl Default for IkOptions {
+    fn default() -> Self {
+        Self {
+            iterations: 100,
+            damping: 0.05,
+            tol_position: 1e-4,
+            tol_angle: 1e-4,
+        }
+    }
+}
+
+/// Result of [`solve_ik`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct IkSolution {
+    /// Joint positions of every joint ([`Robot::joints`] order); joints outside the solved set
+    /// keep their current positions.
+    pub q: Vec<f64>,
+    /// Remaining position error of the frame, m.
+    pub position_error: f64,
+    /// Remaining rotation error of the frame, rad.
+    pub angle_error: f64,
+}
+
+/// Solves for joint positions of `joints` that put `frame` at `target` (world frame), starting
+/// from `seed` (all joints; None: the current positions).
+pub fn solve_ik(
+    robot: &Robot,
+    ctx: &RigidContext,
+    frame: usize,
+    target: &Isometry3<f64>,
+    joints: &[usize],
+    seed: Option<&[f64]>,
+    options: &IkOptions,
+) -> Result<IkSolution, RobotError> {
+    let invalid = |m: String| RobotError::InvalidInput {
+        robot: robot.name.clone(),
+        message: m,
+    };
+    let f = robot
+        .frames
+        .get(frame)
+        .ok_or_else(|| invalid(format!("no frame {frame}")))?;
+    if !(target.translation.vector.iter().all(|v| v.is_finite())
+        && target.rotation.coords.iter().all(|v| v.is_finite()))
+    {
+        return Err(invalid("IK target not finite".into()));
+    }
+    if !(options.damping.is_finite() && options.damping >= 0.0) {
+        return Err(invalid(format!("IK damping {} invalid", options.damping)));
+    }
+    for &j in joints {
+        if j >= robot.num_joints() {
+            return Err(invalid(format!("no joint {j}")));
+        }
+    }
+    let current = robot.joint_positions(ctx)?;
+    let start = match seed {
+        Some(s) if s.len() == current.len() && s.iter().all(|v| v.is_finite()) => s.to_vec(),
+        Some(s) => {
+            return Err(invalid(format!(
+                "IK seed has {} finite values, expected {}",
+                s.len(),
+                current.len()
+            )))
+        }
+        None => current.clone(),
+    };
+    let (mb, ids) = robot.multibody(ctx)?;
+    let link_of_body = |b: usize| -> Result<usize, RobotError> {
+        ctx.multibody_joints
+            .rigid_body_link(robot.bodies[b].handle)
+            .map(|l| l.id)
+            .ok_or_else(|| robot.stale("body not in the multibody"))
+    };
+    let target_link = link_of_body(f.body)?;
+    let dof = |i: usize| -> Result<usize, RobotError> {
+        mb.link(ids[i])
+            .map(|l| l.assembly_id())
+            .ok_or_else(|| robot.stale("joint link missing"))
+    };
+    let movable: Vec<_> = joints.iter().map(|&j| robot.bodies[robot.joints[j].body].handle).collect();
+    // Target pose of the body that carries the frame.
+    let body_target = pose_to_rapier(&(target * f.offset.inverse()));
+    let mut disp = DVector::zeros(mb.ndofs());
+    for i in 0..robot.num_joints() {
+        disp[dof(i)?] = (start[i] - current[i]) as f32;
+    }
+    let step = InverseKinematicsOption {
+        damping: options.damping as f32,
+        max_iters: 1,
+        constrained_axes: JointAxesMask::all(),
+        epsilon_linear: 0.0,
+        epsilon_angular: 0.0,
+    };
+    let branch = mb.kinematic_branch(target_link);
+    let error_of = |disp: &DVector| -> (f64, f64) {
+        let pose = mb.forward_kinematics_single_branch(&ctx.bodies, &branch, Some(disp.as_slice()), None);
+        let got = pose_from_rapier(&pose) * f.offset;
+        (
+            (got.translation.vector - target.translation.vector).norm(),
+            got.rotation.angle_to(&target.rotation),
+        )
+    };
+    for it in 0..options.iterations {
+        mb.inverse_kinematics(
+            &ctx.bodies,
+            target_link,
+            &step,
+            &body_target,
+            |link| movable.contains(&link.rigid_body_handle()),
+            &mut disp,
+        );
+        for &j in joints {
+            let d = dof(j)?;
+            let q = (current[j] + f64::from(disp[d])).clamp(robot.joints[j].lower, robot.joints[j].upper);
+            disp[d] = (q - current[j]) as f32;
+        }
+        if it % 10 == 9 {
+            let (ep, ea) = error_of(&disp);
+            if ep <= options.tol_position && ea <= options.tol_angle {
+                break;
+            }
+        }
+    }
+    let (position_error, angle_error) = error_of(&disp);
+    let mut q = current.clone();
+    for (i, qi) in q.iter_mut().enumerate() {
+        *qi = current[i] + f64::from(disp[dof(i)?]);
+    }
+    Ok(IkSolution {
+        q,
+        position_error,
+        angle_error,
+    })
+}
+
+/// World pose of `frame` if the joints were at `q` (all joints), without changing the state.
+pub fn forward_kinematics(
+    robot: &Robot,
+    ctx: &RigidContext,
+    frame: usize,
+    q: &[f64],
+) -> Result<Isometry3<f64>, RobotError> {
+    let f = robot.frames.get(frame).ok_or_else(|| RobotError::InvalidInput {
+        robot: robot.name.clone(),
+        message: format!("no frame {frame}"),
+    })?;
+    let current = robot.joint_positions(ctx)?;
+    if q.len() != current.len() || !q.iter().all(|v| v.is_finite()) {
+        return Err(RobotError::InvalidInput {
+            robot: robot.name.clone(),
+            message: format!("expected {} finite joint positions, got {}", current.len(), q.len()),
+        });
+    }
+    let (mb, ids) = robot.multibody(ctx)?;
+    let mut disp = DVector::zeros(mb.ndofs());
+    for i in 0..current.len() {
+        let d = mb
+            .link(ids[i])
+            .map(|l| l.assembly_id())
+            .ok_or_else(|| robot.stale("joint link missing"))?;
+        disp[d] = (q[i] - current[i]) as f32;
+    }
+    let link = ctx
+        .multibody_joints
+        .rigid_body_link(robot.bodies[f.body].handle)
+        .map(|l| l.id)
+        .ok_or_else(|| robot.stale("body not in the multibody"))?;
+    let pose = mb.forward_kinematics_single_link(&ctx.bodies, link, Some(disp.as_slice()), None);
+    Ok(pose_from_rapier(&pose) * f.offset)
+}

@@ -1,0 +1,167 @@
+//! The project's two robots: where their URDFs are, how they are mounted, their named poses and
+//! joint groups.
+
+use std::path::PathBuf;
+
+use modesuite_engine::deps::nalgebra::Isometry3;
+use modesuite_engine::RigidContext;
+
+use crate::error::RobotError;
+use crate::robot::{spawn_robot, Robot, RootMount, SpawnOptions};
+use crate::urdf::{read_urdf, AssetPaths, UrdfModel};
+
+/// Which robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RobotKind {
+    /// Franka Panda on a Clearpath Ridgeback (holonomic base through 3 virtual joints).
+    Franka,
+    /// Boston Dynamics Spot with Spot Arm (floating base, 12 leg joints).
+    Spot,
+}
+
+/// Static description of a robot model: file, mount, joint groups, named poses.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotSpec {
+    /// Which robot.
+    pub kind: RobotKind,
+    /// Registry id (`franka`, `spot`).
+    pub id: &'static str,
+    /// URDF path relative to `assets/robots/`.
+    pub urdf: &'static str,
+    /// Root mount.
+    pub root: RootMount,
+    /// Height of the root frame above the floor in the home pose, m.
+    pub root_height: f64,
+    /// Virtual base joints (x, y, yaw) for a holonomic base.
+    pub base_joints: Option<[&'static str; 3]>,
+    /// Leg joints (empty for wheeled bases).
+    pub leg_joints: &'static [&'static str],
+    /// Arm joints, shoulder to wrist.
+    pub arm_joints: &'static [&'static str],
+    /// Gripper joints (mimic joints included).
+    pub gripper_joints: &'static [&'static str],
+    /// Gripper open and closed positions of the first gripper joint.
+    pub gripper_open_closed: (f64, f64),
+    /// End-effector frame (tool centre point).
+    pub ee_frame: &'static str,
+    /// Home pose: (joint, position) for every joint not at zero.
+    pub home: &'static [(&'static str, f64)],
+}
+
+const FRANKA_ARM: &[&str] = &[
+    "panda_joint1",
+    "panda_joint2",
+    "panda_joint3",
+    "panda_joint4",
+    "panda_joint5",
+    "panda_joint6",
+    "panda_joint7",
+];
+
+const SPOT_LEGS: &[&str] = &[
+    "fl_hx", "fl_hy", "fl_kn", "fr_hx", "fr_hy", "fr_kn", "hl_hx", "hl_hy", "hl_kn", "hr_hx",
+    "hr_hy", "hr_kn",
+];
+
+const SPOT_ARM: &[&str] = &["arm_sh0", "arm_sh1", "arm_el0", "arm_el1", "arm_wr0", "arm_wr1"];
+
+/// Spot standing pose: hip pitch 0.77 rad and knee -1.43 rad put each foot under its hip with
+/// the body origin 0.55 m above the floor (foot sphere radius included).
+pub const SPOT_STAND_HY: f64 = 0.77;
+/// Knee angle of the standing pose, rad.
+pub const SPOT_STAND_KN: f64 = -1.43;
+
+impl RobotSpec {
+    /// The specification of a robot.
+    pub fn of(kind: RobotKind) -> Self {
+        match kind {
+            RobotKind::Franka => Self {
+                kind,
+                id: "franka",
+                urdf: "franka_ridgeback/franka_ridgeback.urdf",
+                root: RootMount::Fixed,
+                root_height: 0.0,
+                base_joints: Some(["base_x", "base_y", "base_yaw"]),
+                leg_joints: &[],
+                arm_joints: FRANKA_ARM,
+                gripper_joints: &["panda_finger_joint1", "panda_finger_joint2"],
+                gripper_open_closed: (0.04, 0.0),
+                ee_frame: "panda_hand_tcp",
+                // Arm pose of Isaac Lab's RIDGEBACK_FRANKA_PANDA_CFG, fingers open.
+                home: &[
+                    ("panda_joint2", -0.569),
+                    ("panda_joint4", -2.810),
+                    ("panda_joint6", 2.0),
+                    ("panda_joint7", 0.741),
+                    ("panda_finger_joint1", 0.04),
+                    ("panda_finger_joint2", 0.04),
+                ],
+            },
+            RobotKind::Spot => Self {
+                kind,
+                id: "spot",
+                urdf: "spot_arm/spot_arm.urdf",
+                root: RootMount::Floating,
+                root_height: 0.55,
+                base_joints: None,
+                leg_joints: SPOT_LEGS,
+                arm_joints: SPOT_ARM,
+                gripper_joints: &["arm_f1x"],
+                gripper_open_closed: (-1.5708, 0.0),
+                ee_frame: "arm_link_tool",
+                // Standing legs; arm stowed (folded back over the body); gripper closed.
+                home: &[
+                    ("fl_hy", SPOT_STAND_HY),
+                    ("fl_kn", SPOT_STAND_KN),
+                    ("fr_hy", SPOT_STAND_HY),
+                    ("fr_kn", SPOT_STAND_KN),
+                    ("hl_hy", SPOT_STAND_HY),
+                    ("hl_kn", SPOT_STAND_KN),
+                    ("hr_hy", SPOT_STAND_HY),
+                    ("hr_kn", SPOT_STAND_KN),
+                    ("arm_sh1", -3.0),
+                    ("arm_el0", 3.0),
+                ],
+            },
+        }
+    }
+
+    /// Path of the URDF inside `assets` (the `package://modesuite_robots/` package).
+    pub fn urdf_path(&self) -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../assets/robots")
+            .join(self.urdf)
+    }
+
+    /// Reads and validates the URDF.
+    pub fn load(&self, assets: &AssetPaths) -> Result<UrdfModel, RobotError> {
+        read_urdf(&self.urdf_path(), assets)
+    }
+
+    /// Builds the robot in its home pose with its root at `pose` (the floor point under the root
+    /// for Spot: the root height is added).
+    pub fn spawn(
+        &self,
+        ctx: &mut RigidContext,
+        model: &UrdfModel,
+        pose: Isometry3<f64>,
+    ) -> Result<Robot, RobotError> {
+        let mut pose = pose;
+        pose.translation.vector.z += self.root_height;
+        spawn_robot(
+            ctx,
+            model,
+            &SpawnOptions {
+                pose,
+                root: self.root,
+                initial: self.home.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
+                friction: 0.8,
+            },
+        )
+    }
+
+    /// Joint indices of a group of names.
+    pub fn indices(&self, robot: &Robot, names: &[&str]) -> Result<Vec<usize>, RobotError> {
+        names.iter().map(|n| robot.joint_index(n)).collect()
+    }
+}

@@ -1,0 +1,28 @@
+//! Shared test set-up.
+#![allow(dead_code)]
+
+use modesuite_engine::deps::nalgebra::Isometry3;
+use modesuite_engine::RigidContext;
+use modesuite_robots::{AssetPaths, Robot, RobotKind, RobotSpec, UrdfModel};
+
+/// Physics substep used by the tests (the engine's default: 60 Hz control, 4 substeps).
+pub const DT: f64 = 1.0 / 240.0;
+
+pub fn assets() -> AssetPaths {
+    AssetPaths::workspace_default()
+}
+
+pub fn model(kind: RobotKind) -> (RobotSpec, UrdfModel) {
+    let spec = RobotSpec::of(kind);
+    let model = spec.load(&assets()).expect("model loads");
+    (spec, model)
+}
+
+pub fn spawn(kind: RobotKind) -> (RigidContext, RobotSpec, Robot) {
+    let (spec, model) = model(kind);
+    let mut ctx = RigidContext::new();
+    let robot = spec
+        .spawn(&mut ctx, &model, Isometry3::identity())
+        .expect("robot spawns");
+    (ctx, spec, robot)
+}

@@ -1,0 +1,155 @@
+//! Joint PD tracking with gravity compensation on the Franka arm, holonomic base velocity
+//! tracking, and Spot standing on its legs under its own weight.
+
+mod common;
+
+use common::DT;
+use modesuite_engine::deps::nalgebra::{Isometry3, Vector3};
+use modesuite_engine::deps::rapier3d::prelude::{ColliderBuilder, RigidBodyBuilder};
+use modesuite_engine::math::vec_to_rapier;
+use modesuite_robots::{BaseVelocity, HolonomicBase, JointController, RobotKind};
+
+/// Steps the Franka arm from home to home + `delta` on every arm joint and returns, per joint,
+/// (error at 1 s, overshoot fraction).
+fn franka_step_response(gravity_compensation: bool, delta: f64) -> Vec<(String, f64, f64)> {
+    let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
+    let arm = spec.indices(&robot, spec.arm_joints).unwrap();
+    let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
+    ctl.gravity_compensation = gravity_compensation;
+    // Settle for 0.5 s at home.
+    for _ in 0..120 {
+        ctl.apply(&robot, &mut ctx).unwrap();
+        ctx.step(DT).unwrap();
+    }
+    let q0 = robot.joint_positions(&ctx).unwrap();
+    let mut target = Vec::new();
+    for &i in &arm {
+        let j = &robot.joints[i];
+        // Step towards the side with room.
+        let d = if q0[i] + delta <= j.upper { delta } else { -delta };
+        target.push(q0[i] + d);
+        ctl.set_position(&robot, i, q0[i] + d).unwrap();
+    }
+    let mut peak = vec![0.0f64; arm.len()];
+    let steps = (1.0 / DT).round() as usize;
+    for _ in 0..steps {
+        ctl.apply(&robot, &mut ctx).unwrap();
+        ctx.step(DT).unwrap();
+        let q = robot.joint_positions(&ctx).unwrap();
+        for (k, &i) in arm.iter().enumerate() {
+            let dir = (target[k] - q0[i]).signum();
+            peak[k] = peak[k].max((q[i] - target[k]) * dir);
+        }
+    }
+    let q = robot.joint_positions(&ctx).unwrap();
+    arm.iter()
+        .enumerate()
+        .map(|(k, &i)| {
+            (
+                robot.joints[i].name.clone(),
+                (q[i] - target[k]).abs(),
+                peak[k] / (target[k] - q0[i]).abs(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn franka_pd_tracking_with_gravity_compensation() {
+    let delta = 0.3;
+    let with = franka_step_response(true, delta);
+    let without = franka_step_response(false, delta);
+    println!("step of {delta} rad on every arm joint, measured 1 s after the step:");
+    println!("joint          | error (tol 0.01 rad) | overshoot (tol 10 %) | error without gravity comp.");
+    for ((name, e, o), (_, e0, _)) in with.iter().zip(&without) {
+        println!("{name:14} | {e:20.5} | {:19.2} % | {e0:.5}", o * 100.0);
+    }
+    let worst_e = with.iter().map(|r| r.1).fold(0.0, f64::max);
+    let worst_o = with.iter().map(|r| r.2).fold(0.0, f64::max);
+    println!("worst: error {worst_e:.5} rad, overshoot {:.2} %", worst_o * 100.0);
+    assert!(worst_e <= 0.01, "steady-state error {worst_e} rad > 0.01");
+    assert!(worst_o <= 0.10, "overshoot {worst_o} > 10 %");
+}
+
+#[test]
+fn franka_holonomic_base_tracks_velocity() {
+    let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
+    let [x, y, yaw] = spec.base_joints.unwrap();
+    let base = HolonomicBase::new(&robot, x, y, yaw).unwrap();
+    let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
+    let cmds = [
+        BaseVelocity { vx: 0.5, vy: 0.0, wz: 0.0 },
+        BaseVelocity { vx: 0.0, vy: -0.5, wz: 0.0 },
+        BaseVelocity { vx: 0.3, vy: 0.2, wz: 1.0 },
+        BaseVelocity { vx: -0.4, vy: 0.3, wz: -0.6 },
+    ];
+    let mut worst = 0.0f64;
+    for cmd in cmds {
+        // 1 s to accelerate, then the mean over 1 s.
+        let mut sum = [0.0; 3];
+        let n = (1.0 / DT).round() as usize;
+        for k in 0..2 * n {
+            base.command(&robot, &ctx, &mut ctl, cmd).unwrap();
+            ctl.apply(&robot, &mut ctx).unwrap();
+            ctx.step(DT).unwrap();
+            if k >= n {
+                let m = base.measured(&robot, &ctx).unwrap();
+                sum[0] += m.vx;
+                sum[1] += m.vy;
+                sum[2] += m.wz;
+            }
+        }
+        let mean = [sum[0] / n as f64, sum[1] / n as f64, sum[2] / n as f64];
+        let want = [cmd.vx, cmd.vy, cmd.wz];
+        let scale = want.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        let rel = (0..3).map(|i| (mean[i] - want[i]).abs() / scale).fold(0.0, f64::max);
+        println!(
+            "command (vx, vy, wz) = ({:+.2}, {:+.2}, {:+.2}) -> measured ({:+.4}, {:+.4}, {:+.4}); error {:.3} % of the command (tol 5 %)",
+            want[0], want[1], want[2], mean[0], mean[1], mean[2], rel * 100.0
+        );
+        worst = worst.max(rel);
+    }
+    assert!(worst <= 0.05, "base velocity error {worst}");
+    // The arm kept its pose while the base moved.
+    let arm = spec.indices(&robot, spec.arm_joints).unwrap();
+    let q = robot.joint_positions(&ctx).unwrap();
+    let mut arm_err = 0.0f64;
+    for &i in &arm {
+        if let modesuite_robots::JointCommand::Position(t) = ctl.commands[i] {
+            arm_err = arm_err.max((q[i] - t).abs());
+        }
+    }
+    println!("arm joint error while driving: {arm_err:.5} rad (tol 0.01)");
+    assert!(arm_err <= 0.01);
+}
+
+#[test]
+fn spot_stands_on_its_legs() {
+    let (mut ctx, _spec, robot) = common::spawn(RobotKind::Spot);
+    // Floor: a fixed box whose top is z = 0.
+    let floor = ctx
+        .bodies
+        .insert(RigidBodyBuilder::fixed().translation(vec_to_rapier(&Vector3::new(0.0, 0.0, -0.5))));
+    ctx.colliders.insert_with_parent(
+        ColliderBuilder::cuboid(10.0, 10.0, 0.5).friction(0.8).build(),
+        floor,
+        &mut ctx.bodies,
+    );
+    let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
+    let z0 = robot.body_pose(&ctx, 0).unwrap().translation.z;
+    let steps = (3.0 / DT).round() as usize;
+    for _ in 0..steps {
+        ctl.apply(&robot, &mut ctx).unwrap();
+        ctx.step(DT).unwrap();
+    }
+    let pose: Isometry3<f64> = robot.body_pose(&ctx, 0).unwrap();
+    let (roll, pitch, _) = pose.rotation.euler_angles();
+    let drift = (pose.translation.vector.xy()).norm();
+    println!(
+        "spot after 3 s standing: body z {:.4} m (spawned {z0:.4}, tol 0.55 +- 0.03), roll {roll:.4}, pitch {pitch:.4} rad (tol 0.05), xy drift {drift:.4} m (tol 0.05)",
+        pose.translation.z
+    );
+    assert!((pose.translation.z - 0.55).abs() <= 0.03);
+    assert!(roll.abs() <= 0.05 && pitch.abs() <= 0.05);
+    assert!(drift <= 0.05);
+}

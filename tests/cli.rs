@@ -1,0 +1,195 @@
+//! Tests of the `modesuite` command line (its public contracts).
+
+use std::process::Command;
+
+fn modesuite() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_modesuite"));
+    c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    c
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("modesuite-cli-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn drop_scene_dump_shows_bodies_at_rest_on_the_ground() {
+    let dump = tmp("drop.json");
+    let out = modesuite()
+        .args([
+            "run",
+            "scenes/examples/drop.scene.ron",
+            "--steps",
+            "300",
+            "--dump-state",
+        ])
+        .arg(&dump)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
+    assert_eq!(v["format"], "modesuite.state.v1");
+    assert_eq!(v["step"], 300);
+    let obj = &v["objects"];
+    let z = |name: &str| obj[name]["position"][2].as_f64().unwrap();
+    let speed = |name: &str| {
+        let l = &obj[name]["linear_velocity"];
+        (0..3)
+            .map(|i| l[i].as_f64().unwrap().powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    println!(
+        "after 5 s: box z {:.4} m (rests on a face: 0.05, 0.10 or 0.15), speed {:.2e}; ball z {:.4} (0.1), speed {:.2e}; ring z {:.4}",
+        z("box"), speed("box"), z("ball"), speed("ball"), z("ring")
+    );
+    let bz = z("box");
+    assert!(
+        [0.05, 0.10, 0.15].iter().any(|h| (bz - h).abs() < 0.005),
+        "box z {bz}"
+    );
+    assert!(speed("box") < 1e-2);
+    assert!((z("ball") - 0.1).abs() < 0.005);
+    assert!(speed("ball") < 1e-2);
+    assert!((z("ring") - 0.05).abs() < 1e-9);
+    assert_eq!(obj["ring"]["kind"], "static");
+    assert_eq!(obj["box"]["kind"], "dynamic");
+    assert_eq!(obj["box"]["quat_wxyz"].as_array().unwrap().len(), 4);
+}
+
+#[test]
+fn run_json_prints_one_object_per_episode_and_a_summary() {
+    let out = modesuite()
+        .args([
+            "run",
+            "scenes/examples/drop.scene.ron",
+            "--steps",
+            "20",
+            "--episodes",
+            "3",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 4, "{text}");
+    for (i, l) in lines[..3].iter().enumerate() {
+        assert_eq!(l["episode"], i);
+        assert_eq!(l["length"], 20);
+        for k in [
+            "seed",
+            "return",
+            "success",
+            "error",
+            "wall_s",
+            "steps_per_s",
+        ] {
+            assert!(l.get(k).is_some(), "missing {k} in {l}");
+        }
+    }
+    assert_eq!(lines[3]["summary"], true);
+    assert_eq!(lines[3]["episodes"], 3);
+    assert!(lines[3]["env_steps_per_s"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn bench_json_has_the_stable_keys() {
+    let out = modesuite()
+        .args(["bench", "engine", "--json", "--scale", "0.002"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let mut cases = Vec::new();
+    for l in text.lines() {
+        let v: serde_json::Value = serde_json::from_str(l).unwrap();
+        for k in ["case", "steps_per_s", "threads", "envs", "us_per_env_step"] {
+            assert!(v.get(k).is_some(), "missing {k} in {v}");
+        }
+        assert!(v["steps_per_s"].as_f64().unwrap() > 0.0);
+        cases.push(v["case"].as_str().unwrap().to_string());
+    }
+    println!("cases: {cases:?}");
+    for c in ["schedule", "empty_env", "empty_x16"] {
+        assert!(cases.iter().any(|x| x == c), "case {c} missing");
+    }
+}
+
+#[test]
+fn bad_input_exits_2_with_a_located_message_and_no_panic() {
+    let bad = tmp("bad.scene.ron");
+    std::fs::write(&bad, "Scene(\n  objects: [\n    (name: \"x\", shape: Sphere(radius: 0.1), body: Static, mass: 3.0),\n  ],\n)\n").unwrap();
+    let out = modesuite().arg("validate").arg(&bad).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    println!("{err}");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(err.contains(&format!("{}:3:", bad.display())), "{err}");
+    assert!(!err.contains("panicked"));
+
+    let nan = tmp("nan.scene.ron");
+    std::fs::write(
+        &nan,
+        "Scene(objects: [(name: \"x\", shape: Box(size: (1.0, NaN, 1.0)), body: Static)])",
+    )
+    .unwrap();
+    let out = modesuite().arg("run").arg(&nan).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    println!("{err}");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(err.contains("objects[0] \"x\".shape.size"), "{err}");
+
+    for args in [
+        vec!["run", "no/such/file.scene.ron"],
+        vec!["run", "MoDe-Franka-Place-v0"],
+        vec!["bench", "nonsense"],
+        vec!["list", "nonsense"],
+        vec!["run", "scenes/examples/drop.scene.ron", "--steps", "0"],
+    ] {
+        let out = modesuite().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        println!("{args:?}: {err}");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(err.starts_with("error: "));
+    }
+}
+
+#[test]
+fn validate_every_example_and_list_categories() {
+    let out = modesuite()
+        .args(["validate", "scenes/examples/drop.scene.ron"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("ok (4 objects"));
+    let out = modesuite().args(["list", "body-kinds"]).output().unwrap();
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("Dynamic"));
+}
+
+#[test]
+fn default_command_runs_the_embedded_default() {
+    let out = modesuite().output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("summary: 1 episodes"), "{text}");
+}
