@@ -1364,7 +1364,7 @@ impl FemSolid {
 
     /// Chord (quasi-Newton) iterations with the cached factor as the Newton matrix, Armijo line
     /// search on the potential, and a refactor at the current shape when the contraction rate
-    /// exceeds 0.25 (the reference shape no longer represents the tangent).
+    /// exceeds 0.5 (the reference shape no longer represents the tangent).
     fn chord(
         &mut self,
         p: &Problem,
@@ -1455,7 +1455,7 @@ impl FemSolid {
                 stats.converged = true;
                 return Ok(true);
             }
-            if (alpha < 1.0 || moved > 0.25 * prev_step) && !refactored {
+            if (alpha < 1.0 || moved > 0.5 * prev_step) && !refactored {
                 // slow or damped convergence: refactor the matrix at the current shape (once per solve)
                 self.precond_at = Some(self.pos.clone());
                 self.precond = None;
