@@ -9,6 +9,8 @@
 
 pub use modesuite_engine as engine;
 pub use modesuite_engine::prelude;
+pub use modesuite_fem as fem;
+pub use modesuite_pbd as pbd;
 
 pub mod cli;
 
@@ -21,7 +23,10 @@ pub struct DefaultPlugins;
 
 impl PluginGroup for DefaultPlugins {
     fn plugins(self) -> Vec<Arc<dyn Plugin>> {
-        modesuite_engine::EnginePlugins.plugins()
+        let mut p = modesuite_engine::EnginePlugins.plugins();
+        p.push(Arc::new(modesuite_fem::FemPlugin));
+        p.push(Arc::new(modesuite_pbd::PbdPlugin));
+        p
     }
 }
 

@@ -43,6 +43,7 @@ pub struct Reaction {
 }
 
 /// A world without colliders (for solvers used standalone).
+#[derive(Debug, Clone, Copy, Default)]
 pub struct NoColliders;
 
 impl ContactQuery for NoColliders {

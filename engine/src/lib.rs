@@ -46,7 +46,7 @@ pub use app::{
     Plugins, SimApp, SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
 };
 pub use env::{Env, EnvInfo, Space, Spaces, StepOutcome, VecEnv, VecStep};
-pub use rigid::{RigidContext, RigidPlugin, RigidSystems};
+pub use rigid::{DeformableSystems, RigidContext, RigidPlugin, RigidSystems};
 pub use scene::{SceneDesc, SceneError, SceneModel, SceneSource};
 
 /// Re-exports of the math and ECS crates, so plugins use the same versions.
@@ -76,7 +76,7 @@ pub mod prelude {
     pub use crate::components::{DeformableNodes, Object, Pose, Velocity};
     pub use crate::coupling::{ContactQuery, PointContact, Reaction};
     pub use crate::env::{Env, EnvInfo, Space, Spaces, StepOutcome, VecEnv};
-    pub use crate::rigid::{RigidContext, RigidPlugin, RigidSystems};
+    pub use crate::rigid::{DeformableSystems, RigidContext, RigidPlugin, RigidSystems};
     pub use crate::scene::{SceneDesc, SceneError, SceneSource};
     pub use crate::shapes::{ShapeDesc, SurfaceMesh, VolumeMesh};
     pub use crate::EnginePlugins;

@@ -31,6 +31,9 @@ pub struct BodyCompileContext<'a> {
     pub settings: &'a crate::SimSettings,
     /// Friction/restitution/density of the object's material.
     pub material: &'a crate::scene::MaterialDesc,
+    /// Where the scene came from (to turn parameter errors into file positions with
+    /// [`crate::scene::plugin_params_error`]).
+    pub source: &'a crate::scene::SceneSource,
 }
 
 /// A kind of body provided by a plugin (FEM solid, cloth, ...).

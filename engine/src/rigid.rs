@@ -31,6 +31,20 @@ pub enum RigidSystems {
     Step,
 }
 
+/// Deformable solvers inside `SubstepSystems::Solve`, chained in this order and all before
+/// [`RigidSystems::Step`], so that their contact queries and reactions have a fixed order (no
+/// ambiguity between two solvers that both push reactions). In `PhysicsStep` the same sets are
+/// chained inside `PhysicsSystems::Writeback` for the systems that write `DeformableNodes`.
+#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+pub enum DeformableSystems {
+    /// Elastic solids (`fem.solid`).
+    Elastic,
+    /// Cloth (`pbd.cloth`).
+    Cloth,
+    /// Any other deformable a plugin adds.
+    Custom,
+}
+
 /// Handle of an object's rapier body.
 #[derive(Component, Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RigidRef(pub RigidBodyHandle);
@@ -51,6 +65,28 @@ impl Plugin for RigidPlugin {
         app.configure_sets(
             crate::Substep,
             RigidSystems::Step.in_set(SubstepSystems::Solve),
+        );
+        app.configure_sets(
+            crate::Substep,
+            (
+                DeformableSystems::Elastic,
+                DeformableSystems::Cloth,
+                DeformableSystems::Custom,
+            )
+                .chain()
+                .in_set(SubstepSystems::Solve)
+                .before(RigidSystems::Step),
+        );
+        // The same order for the deformables' writeback systems.
+        app.configure_sets(
+            crate::PhysicsStep,
+            (
+                DeformableSystems::Elastic,
+                DeformableSystems::Cloth,
+                DeformableSystems::Custom,
+            )
+                .chain()
+                .in_set(PhysicsSystems::Writeback),
         );
         app.add_systems(crate::Substep, rigid_step.in_set(RigidSystems::Step));
         app.add_systems(

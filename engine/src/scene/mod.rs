@@ -9,6 +9,7 @@
 
 mod desc;
 mod error;
+mod select;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -20,6 +21,7 @@ use ron::value::RawValue;
 
 pub use desc::{BodyDesc, MaterialDesc, ObjectDesc, PhysicsDesc, PoseDesc, SceneDesc};
 pub use error::SceneError;
+pub use select::NodeSelect;
 
 use crate::components::{Object, Pose};
 use crate::registry::{BodyCompileContext, BodyKind, CompiledBody, Registry};
@@ -57,9 +59,15 @@ impl SceneSource {
     }
 }
 
+/// The RON options of scene files, also for plugin-owned sections: optional fields may be
+/// written without `Some(...)` (RON's `implicit_some` extension).
+pub fn ron_options() -> ron::Options {
+    ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME)
+}
+
 /// Parses scene text; `label` names the file in errors.
 pub fn parse_str(text: &str, label: &str) -> Result<SceneDesc, SceneError> {
-    ron::Options::default()
+    ron_options()
         .from_str::<SceneDesc>(text)
         .map_err(|e| SceneError::from_ron(label, &e))
 }
@@ -386,11 +394,7 @@ pub fn plugin_params_error(
     path: &str,
     e: &ron::error::SpannedError,
 ) -> SceneError {
-    if let (Some(text), Some((l0, c0))) = (
-        source.text.as_deref(),
-        source.text.as_deref().and_then(|t| locate(t, params_ron)),
-    ) {
-        let _ = text;
+    if let Some((l0, c0)) = source.text.as_deref().and_then(|t| locate(t, params_ron)) {
         let line = l0 + e.span.start.line - 1;
         let col = if e.span.start.line == 1 {
             c0 + e.span.start.col - 1
@@ -569,6 +573,7 @@ fn compile_inner(
                     shapes: &shape_ctx,
                     settings: &settings,
                     material: &material,
+                    source,
                 };
                 let compiled = body_kind.compile(&ctx)?;
                 BodyModel::Plugin {

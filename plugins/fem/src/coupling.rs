@@ -3,46 +3,12 @@
 //! The FEM solver does not know about rigid-body engines: it asks a [`ContactQuery`] for the
 //! closest points of rigid colliders near its surface nodes and reports the impulses it applied
 //! to rigid bodies as [`Reaction`]s. The engine implements the query (over parry/rapier) and
-//! applies the reactions. These types will move to the engine crate and be re-exported here.
+//! applies the reactions. The three interface types are the engine's, re-exported here; [`NoContacts`] and
+//! [`HalfSpace`] are small implementations for standalone use and tests.
 
 use nalgebra::Vector3;
 
-/// Closest point of a rigid collider near a query point (world frame, SI units).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PointContact {
-    /// Closest point on the collider surface (world frame, m).
-    pub point: Vector3<f64>,
-    /// Unit normal at `point`, pointing outward from the collider (world frame).
-    pub normal: Vector3<f64>,
-    /// Signed distance from the query point to the collider surface (m), negative inside.
-    pub distance: f64,
-    /// Coulomb friction coefficient of the contact pair (dimensionless).
-    pub friction: f64,
-    /// Identifier of the rigid body that owns the collider (the engine's handle).
-    pub body: u32,
-    /// Velocity of the collider surface at `point` (world frame, m/s).
-    pub velocity: Vector3<f64>,
-}
-
-/// Source of rigid contacts for the deformable solver.
-pub trait ContactQuery {
-    /// Appends to `out` the closest collider points within `max_distance` (m) of `p` (world
-    /// frame). At most one entry per collider is expected; `out` is not cleared by the callee's
-    /// contract, the caller clears it before the call.
-    fn contacts_near(&self, p: &Vector3<f64>, max_distance: f64, out: &mut Vec<PointContact>);
-}
-
-/// Impulse the deformable applied on rigid body `body` at `point` during a step (N s); the caller
-/// applies it (as a force J/dt for multibody links).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Reaction {
-    /// Identifier of the rigid body that receives the impulse.
-    pub body: u32,
-    /// Application point (world frame, m).
-    pub point: Vector3<f64>,
-    /// Impulse on the rigid body (world frame, N s).
-    pub impulse: Vector3<f64>,
-}
+pub use modesuite_engine::coupling::{ContactQuery, PointContact, Reaction};
 
 /// A [`ContactQuery`] with no colliders (free space).
 #[derive(Clone, Copy, Debug, Default)]

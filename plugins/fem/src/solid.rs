@@ -62,6 +62,7 @@ use crate::material::Material;
 use crate::model::SolidModel;
 use crate::sparse::{dot, pcg, ProfileCholesky};
 use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use std::sync::Arc;
 
 /// Solver settings. Defaults suit the task scenes (dt = 1/60 s, or substeps of it).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -324,7 +325,8 @@ const STATE_MAGIC: f64 = 7.1e7 + 1.0; // format tag of get_state (version 1)
 /// - `vel`: node velocities, `n_nodes` x 3 (m/s).
 /// - `ext_force`: external dead loads per node, `n_nodes` x 3 (N).
 pub struct FemSolid {
-    model: SolidModel,
+    /// Immutable compiled model, shared between environment copies.
+    model: Arc<SolidModel>,
     config: FemConfig,
     pos: Vec<Vector3<f64>>,
     vel: Vec<Vector3<f64>>,
@@ -378,11 +380,12 @@ impl FemSolid {
     ) -> Result<Self, FemError> {
         config.validate()?;
         let model = SolidModel::new(nodes, tets, material)?;
-        Ok(Self::from_model(model, config))
+        Ok(Self::from_model(Arc::new(model), config))
     }
 
-    /// Builds a solid from an already compiled model.
-    pub fn from_model(model: SolidModel, config: FemConfig) -> Self {
+    /// Builds a solid from an already compiled model, shared (e.g. by all environments of a
+    /// vectorised env); the solid starts at the rest shape.
+    pub fn from_model(model: Arc<SolidModel>, config: FemConfig) -> Self {
         let n = model.n_nodes();
         let nb = model.pattern.cols.len();
         let z = vec![Vector3::zeros(); n];
@@ -424,6 +427,11 @@ impl FemSolid {
     /// The compiled model (mesh, masses, quadrature data).
     pub fn model(&self) -> &SolidModel {
         &self.model
+    }
+
+    /// The shared handle of the compiled model (to build more solids from it).
+    pub fn shared_model(&self) -> Arc<SolidModel> {
+        Arc::clone(&self.model)
     }
 
     /// Solver settings.

@@ -278,8 +278,16 @@ fn snapshot_restore_and_determinism_are_bit_exact() {
     scripted_run(&mut c, 20, Some(5));
     let again = scripted_run(&mut c, 30, None);
     assert_eq!(bits(&continued), bits(&again), "same inputs, same bits");
+    // a solid sharing the compiled model (as vectorised envs do) restores and replays the same
+    let mut d = FemSolid::from_model(a.shared_model(), FemConfig::default());
+    d.set_state(&snapshot).unwrap();
+    assert_eq!(
+        bits(&scripted_run(&mut d, 30, None)),
+        bits(&continued),
+        "shared model, same bits"
+    );
     println!(
-        "snapshot: {} values, restore + 30 steps bit-identical",
+        "snapshot: {} values, restore + 30 steps bit-identical (own and shared model)",
         snapshot.len()
     );
     assert!(matches!(

@@ -63,6 +63,7 @@ pub mod coupling;
 mod error;
 mod material;
 mod mesh;
+pub mod plugin;
 mod selfcollide;
 pub mod testing;
 #[cfg(test)]
@@ -75,3 +76,4 @@ pub use coupling::{ContactQuery, NoColliders, PointContact, Reaction};
 pub use error::PbdError;
 pub use material::{ClothMaterial, SolverSettings, TetherMetric};
 pub use mesh::GridSheet;
+pub use plugin::{ClothKind, ClothParams, PbdContext, PbdPlugin};

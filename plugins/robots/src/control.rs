@@ -31,32 +31,95 @@ pub enum JointCommand {
     Passive,
 }
 
-/// PD gains of one joint's motor. rapier's acceleration-based motor model is used, so the gains
-/// are per unit of effective inertia: `stiffness = omega^2`, `damping = 2 zeta omega` for a
-/// closed-loop natural frequency omega (rad/s) and damping ratio zeta.
+/// PD gains of one joint's motor (rapier's implicit force-based motor, limited to the joint's
+/// effort minus the gravity feed-forward).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct JointGains {
-    /// Position gain, 1/s^2.
-    pub stiffness: f64,
-    /// Velocity gain, 1/s.
-    pub damping: f64,
-}
-
-impl JointGains {
-    /// Gains for a natural frequency `omega` (rad/s) and damping ratio `zeta`.
-    pub fn from_frequency(omega: f64, zeta: f64) -> Self {
-        Self {
-            stiffness: omega * omega,
-            damping: 2.0 * zeta * omega,
-        }
-    }
+pub enum JointGains {
+    /// Gains scaled by the joint-space inertia `M_kk` of the joint at the current configuration
+    /// (the inertia it moves with every other joint held): `kp = omega^2 M_kk`,
+    /// `kd = 2 zeta omega M_kk`, for a closed-loop natural frequency `omega` (rad/s) and damping
+    /// ratio `zeta`. Suits arms, whose load is their own links.
+    Inertial {
+        /// Natural frequency, rad/s.
+        omega: f64,
+        /// Damping ratio.
+        zeta: f64,
+    },
+    /// Absolute gains (N m/rad and N m s/rad, or N/m and N s/m). Suits legs, whose load (the
+    /// body's weight through the feet) is not in their own inertia.
+    Absolute {
+        /// Position gain.
+        kp: f64,
+        /// Velocity gain.
+        kd: f64,
+    },
 }
 
 impl Default for JointGains {
     /// 25 rad/s natural frequency, critically damped: settles in about 0.25 s.
     fn default() -> Self {
-        Self::from_frequency(25.0, 1.0)
+        JointGains::Inertial {
+            omega: 25.0,
+            zeta: 1.0,
+        }
     }
+}
+
+impl JointGains {
+    /// (kp, kd) for a joint-space inertia `m_kk`.
+    pub fn resolve(&self, m_kk: f64) -> (f64, f64) {
+        match *self {
+            JointGains::Inertial { omega, zeta } => {
+                (omega * omega * m_kk, 2.0 * zeta * omega * m_kk)
+            }
+            JointGains::Absolute { kp, kd } => (kp, kd),
+        }
+    }
+}
+
+/// Diagonal of the joint-space mass matrix, `M_kk = sum_i J_i,k^T diag(m_i, I_i) J_i,k` over the
+/// robot's bodies (rapier's body Jacobians, linear part at the centre of mass), one per joint.
+pub fn joint_inertias(robot: &Robot, ctx: &RigidContext) -> Result<Vec<f64>, RobotError> {
+    use modesuite_engine::deps::nalgebra::Matrix3;
+    let (mb, ids) = robot.multibody(ctx)?;
+    let dofs: Vec<usize> = ids
+        .iter()
+        .map(|id| {
+            mb.link(*id)
+                .map(|l| l.assembly_id())
+                .ok_or_else(|| robot.stale("joint link missing"))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut out = vec![0.0; dofs.len()];
+    for link in mb.links() {
+        let Some(rb) = ctx.bodies.get(link.rigid_body_handle()) else {
+            continue;
+        };
+        if !rb.is_dynamic() {
+            continue;
+        }
+        let m = f64::from(rb.mass());
+        let local = rb
+            .mass_properties()
+            .local_mprops
+            .reconstruct_inertia_matrix();
+        let cols = local.to_cols_array();
+        let il = Matrix3::from_column_slice(&cols.map(f64::from));
+        let r =
+            modesuite_engine::math::rot_from_rapier(rb.position().rotation).to_rotation_matrix();
+        let iw = r.matrix() * il * r.matrix().transpose();
+        let jac = mb.body_jacobian(link.link_id());
+        for (k, &d) in dofs.iter().enumerate() {
+            if d >= jac.ncols() {
+                continue;
+            }
+            let col = jac.column(d);
+            let v = Vector3::new(f64::from(col[0]), f64::from(col[1]), f64::from(col[2]));
+            let w = Vector3::new(f64::from(col[3]), f64::from(col[4]), f64::from(col[5]));
+            out[k] += m * v.dot(&v) + w.dot(&(iw * w));
+        }
+    }
+    Ok(out)
 }
 
 /// Damping factor of velocity motors (1/s): how fast a velocity command is reached.
@@ -92,7 +155,10 @@ impl JointController {
 
     /// Sets a position command for a joint (clamped to its limits).
     pub fn set_position(&mut self, robot: &Robot, joint: usize, q: f64) -> Result<(), RobotError> {
-        let j = robot.joints.get(joint).ok_or_else(|| bad_joint(robot, joint))?;
+        let j = robot
+            .joints
+            .get(joint)
+            .ok_or_else(|| bad_joint(robot, joint))?;
         if !q.is_finite() {
             return Err(RobotError::InvalidInput {
                 robot: robot.name.clone(),
@@ -105,7 +171,10 @@ impl JointController {
 
     /// Sets a velocity command for a joint (clamped to its velocity limit).
     pub fn set_velocity(&mut self, robot: &Robot, joint: usize, v: f64) -> Result<(), RobotError> {
-        let j = robot.joints.get(joint).ok_or_else(|| bad_joint(robot, joint))?;
+        let j = robot
+            .joints
+            .get(joint)
+            .ok_or_else(|| bad_joint(robot, joint))?;
         if !v.is_finite() {
             return Err(RobotError::InvalidInput {
                 robot: robot.name.clone(),
@@ -125,7 +194,10 @@ impl JointController {
         let mut mass = vec![0.0; nb];
         let mut moment = vec![Vector3::zeros(); nb];
         for (i, b) in robot.bodies.iter().enumerate() {
-            let rb = ctx.bodies.get(b.handle).ok_or_else(|| robot.stale("body removed"))?;
+            let rb = ctx
+                .bodies
+                .get(b.handle)
+                .ok_or_else(|| robot.stale("body removed"))?;
             if rb.is_dynamic() {
                 let m = f64::from(rb.mass());
                 mass[i] = m;
@@ -221,7 +293,8 @@ impl JointController {
             }
         }
         // Motors.
-        let (mb, ids) = robot.multibody_mut(ctx)?;
+        let inertia = joint_inertias(robot, ctx)?;
+        let (mb, ids) = robot.multibody_mut(&mut ctx.multibody_joints)?;
         for (i, (j, id)) in robot.joints.iter().zip(&ids).enumerate() {
             let command = match j.mimic {
                 Some((leader, mult, off)) => match self.commands[leader] {
@@ -237,14 +310,15 @@ impl JointController {
                 .link_mut(*id)
                 .ok_or_else(|| robot.stale("joint link missing"))?;
             let data = &mut link.joint.data;
-            data.set_motor_model(axis, MotorModel::AccelerationBased);
             match command {
                 JointCommand::Position(q) => {
-                    let g = self.gains[i];
-                    data.set_motor(axis, q as f32, 0.0, g.stiffness as f32, g.damping as f32);
+                    let (kp, kd) = self.gains[i].resolve(inertia[i]);
+                    data.set_motor_model(axis, MotorModel::ForceBased);
+                    data.set_motor(axis, q as f32, 0.0, kp as f32, kd as f32);
                     data.set_motor_max_force(axis, budget as f32);
                 }
                 JointCommand::Velocity(v) => {
+                    data.set_motor_model(axis, MotorModel::AccelerationBased);
                     data.set_motor(axis, 0.0, v as f32, 0.0, VELOCITY_MOTOR_FACTOR as f32);
                     data.set_motor_max_force(axis, budget as f32);
                 }

@@ -3,8 +3,10 @@
 //! Each iteration runs forward kinematics of the branch (rapier's `forward_kinematics_single_branch`
 //! through `Multibody::inverse_kinematics` with one iteration), takes one damped-least-squares
 //! step `dq = J^T (J J^T + lambda^2 I)^-1 e` on the pose error e (position and rotation vector),
-//! and clamps the result to the joint limits. Nothing in the physics state changes: the solution
-//! is returned as joint positions.
+//! and clamps the result to the joint limits. An attempt is `iterations` (100) such steps; when it
+//! ends above the tolerances (a local minimum, often against a limit) up to `restarts` further
+//! attempts start from deterministic offsets of the seed and the best attempt is returned.
+//! Nothing in the physics state changes: the solution is returned as joint positions.
 
 use modesuite_engine::deps::nalgebra::Isometry3;
 use modesuite_engine::deps::rapier3d::math::DVector;
@@ -26,6 +28,12 @@ pub struct IkOptions {
     pub tol_position: f64,
     /// Stop once the angle error is below this, rad.
     pub tol_angle: f64,
+    /// Further attempts when an attempt ends above the tolerances, each from the start
+    /// configuration shifted by a fixed (deterministic) offset of up to +-`restart_spread` per
+    /// joint; the best attempt is returned.
+    pub restarts: usize,
+    /// Largest seed offset of a restart, rad or m.
+    pub restart_spread: f64,
 }
 
 impl Default for IkOptions {
@@ -35,6 +43,8 @@ impl Default for IkOptions {
             damping: 0.05,
             tol_position: 1e-4,
             tol_angle: 1e-4,
+            restarts: 4,
+            restart_spread: 0.6,
         }
     }
 }
@@ -49,7 +59,26 @@ pub struct IkSolution {
     pub position_error: f64,
     /// Remaining rotation error of the frame, rad.
     pub angle_error: f64,
+    /// Attempts made (1 + restarts used).
+    pub attempts: usize,
 }
+
+/// Fractional parts of square roots of primes: a fixed low-discrepancy sequence of restart
+/// offsets (Weyl sequence), so a solve is reproducible.
+const WEYL: [f64; 12] = [
+    0.414_213_562,
+    0.732_050_808,
+    0.236_067_977,
+    0.645_751_311,
+    0.316_624_790,
+    0.605_551_275,
+    0.123_105_626,
+    0.358_898_944,
+    0.795_831_523,
+    0.385_164_807,
+    0.567_764_363,
+    0.082_762_530,
+];
 
 /// Solves for joint positions of `joints` that put `frame` at `target` (world frame), starting
 /// from `seed` (all joints; None: the current positions).
@@ -108,13 +137,12 @@ pub fn solve_ik(
             .map(|l| l.assembly_id())
             .ok_or_else(|| robot.stale("joint link missing"))
     };
-    let movable: Vec<_> = joints.iter().map(|&j| robot.bodies[robot.joints[j].body].handle).collect();
+    let movable: Vec<_> = joints
+        .iter()
+        .map(|&j| robot.bodies[robot.joints[j].body].handle)
+        .collect();
     // Target pose of the body that carries the frame.
     let body_target = pose_to_rapier(&(target * f.offset.inverse()));
-    let mut disp = DVector::zeros(mb.ndofs());
-    for i in 0..robot.num_joints() {
-        disp[dof(i)?] = (start[i] - current[i]) as f32;
-    }
     let step = InverseKinematicsOption {
         damping: options.damping as f32,
         max_iters: 1,
@@ -124,35 +152,63 @@ pub fn solve_ik(
     };
     let branch = mb.kinematic_branch(target_link);
     let error_of = |disp: &DVector| -> (f64, f64) {
-        let pose = mb.forward_kinematics_single_branch(&ctx.bodies, &branch, Some(disp.as_slice()), None);
+        let pose =
+            mb.forward_kinematics_single_branch(&ctx.bodies, &branch, Some(disp.as_slice()), None);
         let got = pose_from_rapier(&pose) * f.offset;
         (
             (got.translation.vector - target.translation.vector).norm(),
             got.rotation.angle_to(&target.rotation),
         )
     };
-    for it in 0..options.iterations {
-        mb.inverse_kinematics(
-            &ctx.bodies,
-            target_link,
-            &step,
-            &body_target,
-            |link| movable.contains(&link.rigid_body_handle()),
-            &mut disp,
-        );
-        for &j in joints {
-            let d = dof(j)?;
-            let q = (current[j] + f64::from(disp[d])).clamp(robot.joints[j].lower, robot.joints[j].upper);
-            disp[d] = (q - current[j]) as f32;
+    let converged = |(ep, ea): (f64, f64)| ep <= options.tol_position && ea <= options.tol_angle;
+    // Position error plus angle error at 0.1 m per rad.
+    let score = |(ep, ea): (f64, f64)| ep + 0.1 * ea;
+    let mut best: Option<(DVector, (f64, f64))> = None;
+    let mut attempts = 0;
+    for attempt in 0..=options.restarts {
+        attempts = attempt + 1;
+        let mut disp = DVector::zeros(mb.ndofs());
+        for i in 0..robot.num_joints() {
+            disp[dof(i)?] = (start[i] - current[i]) as f32;
         }
-        if it % 10 == 9 {
-            let (ep, ea) = error_of(&disp);
-            if ep <= options.tol_position && ea <= options.tol_angle {
+        if attempt > 0 {
+            for (m, &j) in joints.iter().enumerate() {
+                let w = (WEYL[m % WEYL.len()] * attempt as f64).fract() * 2.0 - 1.0;
+                let q = (start[j] + w * options.restart_spread)
+                    .clamp(robot.joints[j].lower, robot.joints[j].upper);
+                disp[dof(j)?] = (q - current[j]) as f32;
+            }
+        }
+        for it in 0..options.iterations {
+            mb.inverse_kinematics(
+                &ctx.bodies,
+                target_link,
+                &step,
+                &body_target,
+                |link| movable.contains(&link.rigid_body_handle()),
+                &mut disp,
+            );
+            for &j in joints {
+                let d = dof(j)?;
+                let q = (current[j] + f64::from(disp[d]))
+                    .clamp(robot.joints[j].lower, robot.joints[j].upper);
+                disp[d] = (q - current[j]) as f32;
+            }
+            if it % 10 == 9 && converged(error_of(&disp)) {
                 break;
             }
         }
+        let err = error_of(&disp);
+        if best.as_ref().is_none_or(|(_, e)| score(err) < score(*e)) {
+            best = Some((disp, err));
+        }
+        if converged(err) {
+            break;
+        }
     }
-    let (position_error, angle_error) = error_of(&disp);
+    let Some((disp, (position_error, angle_error))) = best else {
+        return Err(invalid("IK made no attempt".into()));
+    };
     let mut q = current.clone();
     for (i, qi) in q.iter_mut().enumerate() {
         *qi = current[i] + f64::from(disp[dof(i)?]);
@@ -161,6 +217,7 @@ pub fn solve_ik(
         q,
         position_error,
         angle_error,
+        attempts,
     })
 }
 
@@ -171,15 +228,22 @@ pub fn forward_kinematics(
     frame: usize,
     q: &[f64],
 ) -> Result<Isometry3<f64>, RobotError> {
-    let f = robot.frames.get(frame).ok_or_else(|| RobotError::InvalidInput {
-        robot: robot.name.clone(),
-        message: format!("no frame {frame}"),
-    })?;
+    let f = robot
+        .frames
+        .get(frame)
+        .ok_or_else(|| RobotError::InvalidInput {
+            robot: robot.name.clone(),
+            message: format!("no frame {frame}"),
+        })?;
     let current = robot.joint_positions(ctx)?;
     if q.len() != current.len() || !q.iter().all(|v| v.is_finite()) {
         return Err(RobotError::InvalidInput {
             robot: robot.name.clone(),
-            message: format!("expected {} finite joint positions, got {}", current.len(), q.len()),
+            message: format!(
+                "expected {} finite joint positions, got {}",
+                current.len(),
+                q.len()
+            ),
         });
     }
     let (mb, ids) = robot.multibody(ctx)?;

@@ -15,6 +15,8 @@
 //!
 //! Not registered with the engine yet: no plugin, no scene section, no actions.
 
+#![deny(missing_docs)]
+
 pub mod control;
 pub mod error;
 pub mod ik;

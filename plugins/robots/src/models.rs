@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use modesuite_engine::deps::nalgebra::Isometry3;
 use modesuite_engine::RigidContext;
 
+use crate::control::JointGains;
 use crate::error::RobotError;
 use crate::robot::{spawn_robot, Robot, RootMount, SpawnOptions};
 use crate::urdf::{read_urdf, AssetPaths, UrdfModel};
@@ -63,7 +64,15 @@ const SPOT_LEGS: &[&str] = &[
     "hr_hy", "hr_kn",
 ];
 
-const SPOT_ARM: &[&str] = &["arm_sh0", "arm_sh1", "arm_el0", "arm_el1", "arm_wr0", "arm_wr1"];
+const SPOT_ARM: &[&str] = &[
+    "arm_sh0", "arm_sh1", "arm_el0", "arm_el1", "arm_wr0", "arm_wr1",
+];
+
+/// Position gain of Spot's leg joints, N m/rad: the knee's standing load (about 20 N m) costs
+/// about 0.05 rad of error.
+pub const LEG_KP: f64 = 400.0;
+/// Velocity gain of Spot's leg joints, N m s/rad.
+pub const LEG_KD: f64 = 10.0;
 
 /// Spot standing pose: hip pitch 0.77 rad and knee -1.43 rad put each foot under its hip with
 /// the body origin 0.55 m above the floor (foot sphere radius included).
@@ -107,7 +116,7 @@ impl RobotSpec {
                 leg_joints: SPOT_LEGS,
                 arm_joints: SPOT_ARM,
                 gripper_joints: &["arm_f1x"],
-                gripper_open_closed: (-1.5708, 0.0),
+                gripper_open_closed: (-std::f64::consts::FRAC_PI_2, 0.0),
                 ee_frame: "arm_link_tool",
                 // Standing legs; arm stowed (folded back over the body); gripper closed.
                 home: &[
@@ -158,6 +167,26 @@ impl RobotSpec {
                 friction: 0.8,
             },
         )
+    }
+
+    /// Default PD gains per joint: inertia-scaled (25 rad/s, critically damped) for arm, gripper
+    /// and base joints; for legs absolute gains of [`LEG_KP`] N m/rad and [`LEG_KD`] N m s/rad,
+    /// because a standing leg's load is the body's weight, not its own inertia.
+    pub fn default_gains(&self, robot: &Robot) -> Vec<JointGains> {
+        robot
+            .joints
+            .iter()
+            .map(|j| {
+                if self.leg_joints.contains(&j.name.as_str()) {
+                    JointGains::Absolute {
+                        kp: LEG_KP,
+                        kd: LEG_KD,
+                    }
+                } else {
+                    JointGains::default()
+                }
+            })
+            .collect()
     }
 
     /// Joint indices of a group of names.

@@ -10,8 +10,8 @@ use std::collections::HashMap;
 
 use modesuite_engine::deps::nalgebra::{Isometry3, Matrix3, UnitQuaternion, Vector3};
 use modesuite_engine::deps::rapier3d::prelude::{
-    ColliderBuilder, GenericJointBuilder, JointAxesMask, JointAxis, MassProperties, Multibody,
-    MotorModel, RigidBodyBuilder, RigidBodyHandle,
+    ColliderBuilder, GenericJointBuilder, JointAxesMask, JointAxis, MassProperties, MotorModel,
+    Multibody, MultibodyJointSet, RigidBodyBuilder, RigidBodyHandle, SoftBodySet,
 };
 use modesuite_engine::math::{pose_from_rapier, pose_to_rapier, vec_to_rapier};
 use modesuite_engine::RigidContext;
@@ -213,10 +213,7 @@ pub fn spawn_robot(
     if !options.friction.is_finite() || options.friction < 0.0 {
         return Err(RobotError::InvalidInput {
             robot: model.name.clone(),
-            message: format!(
-                "friction must be finite and >= 0, got {}",
-                options.friction
-            ),
+            message: format!("friction must be finite and >= 0, got {}", options.friction),
         });
     }
     let p = &options.pose;
@@ -230,6 +227,13 @@ pub fn spawn_robot(
     }
     // 1. Bodies: the root and every child of an actuated joint; fixed children merge.
     let n = model.links.len();
+    // A UrdfModel can be built by hand: check its indices instead of trusting them.
+    if model.root >= n || model.joints.iter().any(|j| j.parent >= n || j.child >= n) {
+        return Err(RobotError::Structure {
+            file,
+            message: "link index out of range (root or joint parent/child)".into(),
+        });
+    }
     let mut body_of: Vec<Option<(usize, Isometry3<f64>)>> = vec![None; n];
     let mut body_links: Vec<usize> = vec![model.root];
     let mut body_parent: Vec<Option<usize>> = vec![None];
@@ -247,6 +251,19 @@ pub fn spawn_robot(
             body_parent.push(Some(pb));
         }
     }
+    let body_of: Vec<(usize, Isometry3<f64>)> = body_of
+        .into_iter()
+        .enumerate()
+        .map(|(li, b)| {
+            b.ok_or_else(|| RobotError::Structure {
+                file: file.clone(),
+                message: format!(
+                    "link `{}` is not reached from the root",
+                    model.links[li].name
+                ),
+            })
+        })
+        .collect::<Result<_, _>>()?;
     let nb = body_links.len();
     if nb < 2 {
         return Err(RobotError::Structure {
@@ -257,7 +274,7 @@ pub fn spawn_robot(
     // 2. Mass properties per body.
     let mut sums = vec![MassSum::default(); nb];
     for (li, link) in model.links.iter().enumerate() {
-        let (b, off) = body_of[li].expect("every link is reached (validated tree)");
+        let (b, off) = body_of[li];
         if let Some(inr) = &link.inertial {
             let frame = off * inr.origin;
             let r = frame.rotation.to_rotation_matrix();
@@ -269,8 +286,8 @@ pub fn spawn_robot(
     let mut world: Vec<Isometry3<f64>> = vec![options.pose; nb];
     for j in &model.joints {
         if j.kind.is_actuated() {
-            let (pb, poff) = body_of[j.parent].expect("reached");
-            let (cb, _) = body_of[j.child].expect("reached");
+            let (pb, poff) = body_of[j.parent];
+            let (cb, _) = body_of[j.child];
             world[cb] = world[pb] * poff * j.origin;
         }
     }
@@ -279,12 +296,15 @@ pub fn spawn_robot(
     let mut created: Vec<RigidBodyHandle> = Vec::with_capacity(nb);
     let cleanup = |ctx: &mut RigidContext, created: &[RigidBodyHandle]| {
         for h in created.iter().rev() {
+            // The bodies were created by this call: no soft body can be attached to them, so an
+            // empty soft-body set stands in for the context's own.
             ctx.bodies.remove(
                 *h,
                 &mut ctx.islands,
                 &mut ctx.colliders,
                 &mut ctx.impulse_joints,
                 &mut ctx.multibody_joints,
+                &mut SoftBodySet::new(),
                 true,
             );
         }
@@ -310,7 +330,7 @@ pub fn spawn_robot(
         });
     }
     for (li, link) in model.links.iter().enumerate() {
-        let (b, off) = body_of[li].expect("reached");
+        let (b, off) = body_of[li];
         for c in &link.collisions {
             let local = off * c.origin;
             let (builder, fix) = match &c.geometry {
@@ -366,8 +386,8 @@ pub fn spawn_robot(
         if !j.kind.is_actuated() {
             continue;
         }
-        let (pb, poff) = body_of[j.parent].expect("reached");
-        let (cb, _) = body_of[j.child].expect("reached");
+        let (pb, poff) = body_of[j.parent];
+        let (cb, _) = body_of[j.child];
         let r_axis = rotation_x_to(&j.axis);
         let frame1 = poff * j.origin * r_axis;
         let frame2 = Isometry3::from_parts(Default::default(), r_axis);
@@ -430,7 +450,7 @@ pub fn spawn_robot(
         .iter()
         .enumerate()
         .map(|(li, l)| {
-            let (b, off) = body_of[li].expect("reached");
+            let (b, off) = body_of[li];
             RobotFrame {
                 name: l.name.clone(),
                 body: b,
@@ -466,7 +486,7 @@ pub fn spawn_robot(
             }
         }
         {
-            let (mb, ids) = robot.multibody_mut(ctx)?;
+            let (mb, ids) = robot.multibody_mut(&mut ctx.multibody_joints)?;
             mb.set_self_contacts_enabled(false);
             for (j, id) in robot.joints.iter().zip(ids) {
                 let dof = mb
@@ -540,14 +560,16 @@ impl Robot {
         &self,
         ctx: &'a RigidContext,
     ) -> Result<(&'a Multibody, Vec<usize>), RobotError> {
-        let root = ctx
-            .multibody_joints
+        self.multibody_in(&ctx.multibody_joints)
+    }
+
+    fn link_ids(&self, set: &MultibodyJointSet) -> Result<Vec<usize>, RobotError> {
+        let root = set
             .rigid_body_link(self.root())
             .ok_or_else(|| self.stale("root body is not in a multibody"))?;
         let mut ids = Vec::with_capacity(self.joints.len());
         for j in &self.joints {
-            let l = ctx
-                .multibody_joints
+            let l = set
                 .rigid_body_link(self.bodies[j.body].handle)
                 .ok_or_else(|| self.stale("joint body is not in a multibody"))?;
             if l.multibody != root.multibody {
@@ -555,8 +577,19 @@ impl Robot {
             }
             ids.push(l.id);
         }
-        let mb = ctx
-            .multibody_joints
+        Ok(ids)
+    }
+
+    /// The multibody (in a multibody joint set) and the link id of every joint's child body.
+    pub(crate) fn multibody_in<'a>(
+        &self,
+        set: &'a MultibodyJointSet,
+    ) -> Result<(&'a Multibody, Vec<usize>), RobotError> {
+        let ids = self.link_ids(set)?;
+        let root = set
+            .rigid_body_link(self.root())
+            .ok_or_else(|| self.stale("root body is not in a multibody"))?;
+        let mb = set
             .get_multibody(root.multibody)
             .ok_or_else(|| self.stale("multibody removed"))?;
         Ok((mb, ids))
@@ -565,15 +598,13 @@ impl Robot {
     /// Mutable multibody and the link id of every joint's child body.
     pub(crate) fn multibody_mut<'a>(
         &self,
-        ctx: &'a mut RigidContext,
+        set: &'a mut MultibodyJointSet,
     ) -> Result<(&'a mut Multibody, Vec<usize>), RobotError> {
-        let ids = self.multibody(ctx)?.1;
-        let root = *ctx
-            .multibody_joints
+        let ids = self.link_ids(set)?;
+        let root = *set
             .rigid_body_link(self.root())
             .ok_or_else(|| self.stale("root body is not in a multibody"))?;
-        let mb = ctx
-            .multibody_joints
+        let mb = set
             .get_multibody_mut(root.multibody)
             .ok_or_else(|| self.stale("multibody removed"))?;
         Ok((mb, ids))
@@ -613,7 +644,11 @@ impl Robot {
         if q.len() != self.joints.len() {
             return Err(RobotError::InvalidInput {
                 robot: self.name.clone(),
-                message: format!("expected {} joint positions, got {}", self.joints.len(), q.len()),
+                message: format!(
+                    "expected {} joint positions, got {}",
+                    self.joints.len(),
+                    q.len()
+                ),
             });
         }
         for (j, v) in self.joints.iter().zip(q) {
@@ -627,7 +662,7 @@ impl Robot {
                 });
             }
         }
-        let (mb, ids) = self.multibody_mut(ctx)?;
+        let (mb, ids) = self.multibody_mut(&mut ctx.multibody_joints)?;
         // The root joint type follows the root body (free or fixed) only after forward
         // kinematics: do it first, then displace each joint to its target.
         mb.forward_kinematics(&ctx.bodies, true);
@@ -668,11 +703,18 @@ impl Robot {
     }
 
     /// World pose of a frame (URDF link).
-    pub fn frame_pose(&self, ctx: &RigidContext, frame: usize) -> Result<Isometry3<f64>, RobotError> {
-        let f = self.frames.get(frame).ok_or_else(|| RobotError::InvalidInput {
-            robot: self.name.clone(),
-            message: format!("no frame {frame}"),
-        })?;
+    pub fn frame_pose(
+        &self,
+        ctx: &RigidContext,
+        frame: usize,
+    ) -> Result<Isometry3<f64>, RobotError> {
+        let f = self
+            .frames
+            .get(frame)
+            .ok_or_else(|| RobotError::InvalidInput {
+                robot: self.name.clone(),
+                message: format!("no frame {frame}"),
+            })?;
         Ok(self.body_pose(ctx, f.body)? * f.offset)
     }
 }

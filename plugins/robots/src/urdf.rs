@@ -656,7 +656,11 @@ fn validate(
             lower,
             upper,
             effort: if kind.is_actuated() { lim.effort } else { 0.0 },
-            velocity: if kind.is_actuated() { lim.velocity } else { 0.0 },
+            velocity: if kind.is_actuated() {
+                lim.velocity
+            } else {
+                0.0
+            },
             damping,
             friction,
             mimic,

@@ -10,8 +10,8 @@ use modesuite_engine::math::vec_to_rapier;
 use modesuite_robots::{BaseVelocity, HolonomicBase, JointController, RobotKind};
 
 /// Steps the Franka arm from home to home + `delta` on every arm joint and returns, per joint,
-/// (error at 1 s, overshoot fraction).
-fn franka_step_response(gravity_compensation: bool, delta: f64) -> Vec<(String, f64, f64)> {
+/// (error at 1 s, overshoot fraction, settling time into 0.01 rad in s).
+fn franka_step_response(gravity_compensation: bool, delta: f64) -> Vec<(String, f64, f64, f64)> {
     let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
     let arm = spec.indices(&robot, spec.arm_joints).unwrap();
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
@@ -26,19 +26,27 @@ fn franka_step_response(gravity_compensation: bool, delta: f64) -> Vec<(String, 
     for &i in &arm {
         let j = &robot.joints[i];
         // Step towards the side with room.
-        let d = if q0[i] + delta <= j.upper { delta } else { -delta };
+        let d = if q0[i] + delta <= j.upper {
+            delta
+        } else {
+            -delta
+        };
         target.push(q0[i] + d);
         ctl.set_position(&robot, i, q0[i] + d).unwrap();
     }
     let mut peak = vec![0.0f64; arm.len()];
+    let mut settle = vec![0.0f64; arm.len()];
     let steps = (1.0 / DT).round() as usize;
-    for _ in 0..steps {
+    for s in 0..steps {
         ctl.apply(&robot, &mut ctx).unwrap();
         ctx.step(DT).unwrap();
         let q = robot.joint_positions(&ctx).unwrap();
         for (k, &i) in arm.iter().enumerate() {
             let dir = (target[k] - q0[i]).signum();
             peak[k] = peak[k].max((q[i] - target[k]) * dir);
+            if (q[i] - target[k]).abs() > 0.01 {
+                settle[k] = (s + 1) as f64 * DT;
+            }
         }
     }
     let q = robot.joint_positions(&ctx).unwrap();
@@ -49,6 +57,7 @@ fn franka_step_response(gravity_compensation: bool, delta: f64) -> Vec<(String, 
                 robot.joints[i].name.clone(),
                 (q[i] - target[k]).abs(),
                 peak[k] / (target[k] - q0[i]).abs(),
+                settle[k],
             )
         })
         .collect()
@@ -60,13 +69,21 @@ fn franka_pd_tracking_with_gravity_compensation() {
     let with = franka_step_response(true, delta);
     let without = franka_step_response(false, delta);
     println!("step of {delta} rad on every arm joint, measured 1 s after the step:");
-    println!("joint          | error (tol 0.01 rad) | overshoot (tol 10 %) | error without gravity comp.");
-    for ((name, e, o), (_, e0, _)) in with.iter().zip(&without) {
-        println!("{name:14} | {e:20.5} | {:19.2} % | {e0:.5}", o * 100.0);
+    println!("joint          | error (tol 0.01 rad) | overshoot (tol 10 %) | settled to 0.01 rad after (tol 1 s) | error without gravity comp.");
+    for ((name, e, o, ts), (_, e0, _, _)) in with.iter().zip(&without) {
+        println!(
+            "{name:14} | {e:20.5} | {:19.2} % | {ts:33.3} s | {e0:.5}",
+            o * 100.0
+        );
     }
     let worst_e = with.iter().map(|r| r.1).fold(0.0, f64::max);
     let worst_o = with.iter().map(|r| r.2).fold(0.0, f64::max);
-    println!("worst: error {worst_e:.5} rad, overshoot {:.2} %", worst_o * 100.0);
+    let worst_t = with.iter().map(|r| r.3).fold(0.0, f64::max);
+    println!(
+        "worst: error {worst_e:.5} rad, overshoot {:.2} %, settling {worst_t:.3} s",
+        worst_o * 100.0
+    );
+    assert!(worst_t < 1.0, "not settled within 1 s");
     assert!(worst_e <= 0.01, "steady-state error {worst_e} rad > 0.01");
     assert!(worst_o <= 0.10, "overshoot {worst_o} > 10 %");
 }
@@ -78,10 +95,26 @@ fn franka_holonomic_base_tracks_velocity() {
     let base = HolonomicBase::new(&robot, x, y, yaw).unwrap();
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
     let cmds = [
-        BaseVelocity { vx: 0.5, vy: 0.0, wz: 0.0 },
-        BaseVelocity { vx: 0.0, vy: -0.5, wz: 0.0 },
-        BaseVelocity { vx: 0.3, vy: 0.2, wz: 1.0 },
-        BaseVelocity { vx: -0.4, vy: 0.3, wz: -0.6 },
+        BaseVelocity {
+            vx: 0.5,
+            vy: 0.0,
+            wz: 0.0,
+        },
+        BaseVelocity {
+            vx: 0.0,
+            vy: -0.5,
+            wz: 0.0,
+        },
+        BaseVelocity {
+            vx: 0.3,
+            vy: 0.2,
+            wz: 1.0,
+        },
+        BaseVelocity {
+            vx: -0.4,
+            vy: 0.3,
+            wz: -0.6,
+        },
     ];
     let mut worst = 0.0f64;
     for cmd in cmds {
@@ -102,7 +135,9 @@ fn franka_holonomic_base_tracks_velocity() {
         let mean = [sum[0] / n as f64, sum[1] / n as f64, sum[2] / n as f64];
         let want = [cmd.vx, cmd.vy, cmd.wz];
         let scale = want.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        let rel = (0..3).map(|i| (mean[i] - want[i]).abs() / scale).fold(0.0, f64::max);
+        let rel = (0..3)
+            .map(|i| (mean[i] - want[i]).abs() / scale)
+            .fold(0.0, f64::max);
         println!(
             "command (vx, vy, wz) = ({:+.2}, {:+.2}, {:+.2}) -> measured ({:+.4}, {:+.4}, {:+.4}); error {:.3} % of the command (tol 5 %)",
             want[0], want[1], want[2], mean[0], mean[1], mean[2], rel * 100.0
@@ -125,17 +160,20 @@ fn franka_holonomic_base_tracks_velocity() {
 
 #[test]
 fn spot_stands_on_its_legs() {
-    let (mut ctx, _spec, robot) = common::spawn(RobotKind::Spot);
+    let (mut ctx, spec, robot) = common::spawn(RobotKind::Spot);
     // Floor: a fixed box whose top is z = 0.
-    let floor = ctx
-        .bodies
-        .insert(RigidBodyBuilder::fixed().translation(vec_to_rapier(&Vector3::new(0.0, 0.0, -0.5))));
+    let floor = ctx.bodies.insert(
+        RigidBodyBuilder::fixed().translation(vec_to_rapier(&Vector3::new(0.0, 0.0, -0.5))),
+    );
     ctx.colliders.insert_with_parent(
-        ColliderBuilder::cuboid(10.0, 10.0, 0.5).friction(0.8).build(),
+        ColliderBuilder::cuboid(10.0, 10.0, 0.5)
+            .friction(0.8)
+            .build(),
         floor,
         &mut ctx.bodies,
     );
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
+    ctl.gains = spec.default_gains(&robot);
     let z0 = robot.body_pose(&ctx, 0).unwrap().translation.z;
     let steps = (3.0 / DT).round() as usize;
     for _ in 0..steps {

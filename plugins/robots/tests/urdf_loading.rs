@@ -15,7 +15,11 @@ use modesuite_robots::{
 #[test]
 fn franka_ridgeback_structure_and_kinematics() {
     let (spec, model) = common::model(RobotKind::Franka);
-    let actuated: Vec<_> = model.joints.iter().filter(|j| j.kind.is_actuated()).collect();
+    let actuated: Vec<_> = model
+        .joints
+        .iter()
+        .filter(|j| j.kind.is_actuated())
+        .collect();
     println!(
         "franka: {} links, {} joints ({} actuated), total mass {:.2} kg",
         model.links.len(),
@@ -38,7 +42,10 @@ fn franka_ridgeback_structure_and_kinematics() {
     for (name, lo, hi, effort) in expect {
         let jj = j(name);
         assert_eq!(jj.kind, JointKind::Revolute);
-        assert!((jj.lower - lo).abs() < 1e-9 && (jj.upper - hi).abs() < 1e-9, "{name}");
+        assert!(
+            (jj.lower - lo).abs() < 1e-9 && (jj.upper - hi).abs() < 1e-9,
+            "{name}"
+        );
         assert!((jj.effort - effort).abs() < 1e-9, "{name}");
     }
     assert!(j("panda_finger_joint2").mimic.is_some());
@@ -53,7 +60,10 @@ fn franka_ridgeback_structure_and_kinematics() {
     let robot = spec.spawn(&mut ctx, &model, Isometry3::identity()).unwrap();
     let tcp = robot.frame_index(spec.ee_frame).unwrap();
     let zeros = vec![0.0; robot.num_joints()];
-    let p = forward_kinematics(&robot, &ctx, tcp, &zeros).unwrap().translation.vector;
+    let p = forward_kinematics(&robot, &ctx, tcp, &zeros)
+        .unwrap()
+        .translation
+        .vector;
     let err = (p - modesuite_engine::deps::nalgebra::Vector3::new(0.298, 0.0, 1.1285)).norm();
     println!("franka TCP at zero joints: {:.4?} (expected [0.298, 0, 1.1285]), error {:.2e} m (tol 1e-4)", p, err);
     assert!(err < 1e-4);
@@ -62,7 +72,10 @@ fn franka_ridgeback_structure_and_kinematics() {
     let j4 = robot.joint_index("panda_joint4").unwrap();
     let f1 = robot.joint_index("panda_finger_joint1").unwrap();
     let f2 = robot.joint_index("panda_finger_joint2").unwrap();
-    println!("franka home: j4 {:.4} (set -2.810), fingers {:.4} / {:.4} (set 0.04)", q[j4], q[f1], q[f2]);
+    println!(
+        "franka home: j4 {:.4} (set -2.810), fingers {:.4} / {:.4} (set 0.04)",
+        q[j4], q[f1], q[f2]
+    );
     assert!((q[j4] + 2.810).abs() < 1e-5);
     assert!((q[f1] - 0.04).abs() < 1e-6 && (q[f2] - 0.04).abs() < 1e-6);
     println!("franka spawned mass {:.2} kg", robot.total_mass());
@@ -129,7 +142,11 @@ fn bad_input_gives_named_errors() {
     let root = std::env::temp_dir().join(format!("modesuite-robots-test-{}", std::process::id()));
     let assets_dir = root.join("assets");
     let assets = AssetPaths::new(&assets_dir).with_package("pkg", assets_dir.join("pkg"));
-    write_tmp(&assets_dir.join("pkg/meshes"), "m.stl", "solid x\nendsolid x\n");
+    write_tmp(
+        &assets_dir.join("pkg/meshes"),
+        "m.stl",
+        "solid x\nendsolid x\n",
+    );
     write_tmp(&root, "secret.stl", "solid x\nendsolid x\n");
     let base = assets_dir.clone();
     let parse = |text: &str| parse_urdf(text, "test.urdf", &base, &assets);
@@ -146,29 +163,67 @@ fn bad_input_gives_named_errors() {
         ("not xml", "<robot".to_string(), "invalid URDF"),
         (
             "unknown package",
-            variant(r#"<visual><geometry><mesh filename="package://nope/m.stl"/></geometry></visual>"#, OK_LIMIT),
+            variant(
+                r#"<visual><geometry><mesh filename="package://nope/m.stl"/></geometry></visual>"#,
+                OK_LIMIT,
+            ),
             "unknown package `nope`",
         ),
         (
             "escaping path",
-            variant(r#"<visual><geometry><mesh filename="../secret.stl"/></geometry></visual>"#, OK_LIMIT),
+            variant(
+                r#"<visual><geometry><mesh filename="../secret.stl"/></geometry></visual>"#,
+                OK_LIMIT,
+            ),
             "outside the asset roots",
         ),
         (
             "escaping package path",
-            variant(r#"<visual><geometry><mesh filename="package://pkg/../../secret.stl"/></geometry></visual>"#, OK_LIMIT),
+            variant(
+                r#"<visual><geometry><mesh filename="package://pkg/../../secret.stl"/></geometry></visual>"#,
+                OK_LIMIT,
+            ),
             "outside the asset roots",
         ),
-        ("inverted limits", variant("", r#"<limit lower="1" upper="-1" effort="10" velocity="1"/>"#), "joint `j`: lower limit"),
-        ("zero effort", variant("", r#"<limit lower="-1" upper="1" effort="0" velocity="1"/>"#), "joint `j`: effort"),
+        (
+            "inverted limits",
+            variant(
+                "",
+                r#"<limit lower="1" upper="-1" effort="10" velocity="1"/>"#,
+            ),
+            "joint `j`: lower limit",
+        ),
+        (
+            "zero effort",
+            variant(
+                "",
+                r#"<limit lower="-1" upper="1" effort="0" velocity="1"/>"#,
+            ),
+            "joint `j`: effort",
+        ),
         (
             "negative radius",
-            variant(r#"<collision><geometry><sphere radius="-1"/></geometry></collision>"#, OK_LIMIT),
+            variant(
+                r#"<collision><geometry><sphere radius="-1"/></geometry></collision>"#,
+                OK_LIMIT,
+            ),
             "link `b`: sphere radius",
         ),
-        ("unknown parent", good.replace(r#"<parent link="a"/>"#, r#"<parent link="zz"/>"#), "unknown parent link `zz`"),
-        ("two roots", good.replace("</robot>", r#"<link name="c"/></robot>"#), "exactly one root"),
-        ("floating joint", good.replace(r#"type="revolute""#, r#"type="floating""#), "not supported"),
+        (
+            "unknown parent",
+            good.replace(r#"<parent link="a"/>"#, r#"<parent link="zz"/>"#),
+            "unknown parent link `zz`",
+        ),
+        (
+            "two roots",
+            good.replace("</robot>", r#"<link name="c"/></robot>"#),
+            "exactly one root",
+        ),
+        (
+            "floating joint",
+            good.replace(r#"type="revolute""#, r#"type="floating""#),
+            "not supported",
+        ),
     ];
     for (what, text, needle) in cases {
         let err = parse(&text).expect_err(what);
