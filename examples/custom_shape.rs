@@ -100,8 +100,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let desc = SceneDesc {
         objects: vec![
-            object("ground", ShapeDesc::plane([5.0, 5.0]), 0.0, BodyDesc::Static),
-            object("ring", ShapeDesc::torus(0.5, 0.05, 48, 12), 0.05, BodyDesc::Static),
+            object(
+                "ground",
+                ShapeDesc::plane([5.0, 5.0]),
+                0.0,
+                BodyDesc::Static,
+            ),
+            object(
+                "ring",
+                ShapeDesc::torus(0.5, 0.05, 48, 12),
+                0.05,
+                BodyDesc::Static,
+            ),
             object(
                 "star",
                 star,

@@ -537,9 +537,11 @@ fn bench(
     let opts = BenchOptions { scale, threads };
     let records: Vec<BenchRecord> = match name {
         "engine" => modesuite_engine::bench::engine_cases(&opts).map_err(CliError::runtime)?,
-        "fem" | "pbd" | "robots" | "render" | "tasks" => return Err(CliError::input(format!(
+        "fem" | "pbd" | "robots" | "render" | "tasks" => {
+            return Err(CliError::input(format!(
             "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine"
-        ))),
+        )))
+        }
         other => {
             return Err(CliError::input(format!(
                 "bench {other}: unknown suite; available: engine"

@@ -9,8 +9,12 @@ fn root() -> std::path::PathBuf {
 #[test]
 fn architecture_crate_table_matches_the_workspace() {
     let arch = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
-    let start = arch.find("<!-- crate-table:start -->").expect("table start marker");
-    let end = arch.find("<!-- crate-table:end -->").expect("table end marker");
+    let start = arch
+        .find("<!-- crate-table:start -->")
+        .expect("table start marker");
+    let end = arch
+        .find("<!-- crate-table:end -->")
+        .expect("table end marker");
     let mut documented = BTreeSet::new();
     for line in arch[start..end].lines().filter(|l| l.starts_with("| `")) {
         let cols: Vec<&str> = line.split('|').map(str::trim).collect();
@@ -22,7 +26,11 @@ fn architecture_crate_table_matches_the_workspace() {
     let members_start = cargo.find("members = [").expect("workspace members");
     let members_end = members_start + cargo[members_start..].find(']').unwrap();
     let mut actual = BTreeSet::new();
-    for m in cargo[members_start..members_end].split('"').skip(1).step_by(2) {
+    for m in cargo[members_start..members_end]
+        .split('"')
+        .skip(1)
+        .step_by(2)
+    {
         let manifest = std::fs::read_to_string(root().join(m).join("Cargo.toml")).unwrap();
         let name = manifest
             .lines()

@@ -15,7 +15,11 @@ fn run(file: &str, steps: u64) -> Env {
     env.reset(Some(0));
     for i in 0..steps {
         let o = env.step(&[]);
-        assert!(o.info.error.is_none(), "{file} step {i}: {:?}", o.info.error);
+        assert!(
+            o.info.error.is_none(),
+            "{file} step {i}: {:?}",
+            o.info.error
+        );
     }
     env
 }
@@ -38,7 +42,9 @@ fn cloth_drapes_over_the_table_and_comes_to_rest_in_60_s() {
         .filter(|p| p.x.abs() < 0.4 && p.y.abs() < 0.3 && p.z < 0.75 - 1e-4)
         .count();
     let top = n.iter().map(|p| p.z).fold(f64::MIN, f64::max);
-    let ke = env.app.world.resource::<PbdContext>().cloths[0].cloth.kinetic_energy();
+    let ke = env.app.world.resource::<PbdContext>().cloths[0]
+        .cloth
+        .kinetic_energy();
     println!("after 60 s: {inside} particles inside the table (0), top z {top:.4} (table 0.75 + 0.002), kinetic energy {ke:.2e} J (< 1e-4)");
     assert_eq!(inside, 0);
     assert!((top - 0.752).abs() < 2e-3);
@@ -57,5 +63,8 @@ fn curtain_is_pushed_aside_and_stays_on_its_bar_for_60_s() {
     println!("after 60 s: {top} particles still at the bar height, pusher at x = {px:.3} (passed the curtain at x = 0), lowest particle z {lowest:.3}");
     assert!(top >= 10, "pinned top edge stays");
     assert!(px > 0.3, "the box went through");
-    assert!(lowest > 0.2 && lowest < 0.3, "the curtain hangs again: {lowest}");
+    assert!(
+        lowest > 0.2 && lowest < 0.3,
+        "the curtain hangs again: {lowest}"
+    );
 }

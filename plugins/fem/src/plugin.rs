@@ -142,8 +142,7 @@ impl Plugin for FemPlugin {
         app.register_body_kind(Arc::new(SolidKind));
         app.add_systems(
             modesuite_engine::Substep,
-            fem_step
-                .in_set(DeformableSystems::Elastic),
+            fem_step.in_set(DeformableSystems::Elastic),
         );
         app.add_systems(
             modesuite_engine::PhysicsStep,
@@ -223,9 +222,18 @@ impl BodyKind for SolidKind {
         }))
     }
 
-    fn spawn(&self, app: &mut SimApp, entity: Entity, body: &CompiledBody) -> Result<(), SceneError> {
+    fn spawn(
+        &self,
+        app: &mut SimApp,
+        entity: Entity,
+        body: &CompiledBody,
+    ) -> Result<(), SceneError> {
         let c = body.downcast_ref::<CompiledSolid>().ok_or_else(|| {
-            SceneError::semantic("fem.solid", "(compiled body)", "a body compiled by fem.solid")
+            SceneError::semantic(
+                "fem.solid",
+                "(compiled body)",
+                "a body compiled by fem.solid",
+            )
         })?;
         let mut solid = FemSolid::from_model(c.model.clone(), c.config);
         if !c.fixed.is_empty() {
@@ -258,10 +266,7 @@ fn fem_step(
             Some(r) => r,
             None => &NoColliders,
         };
-        if let Err(e) = body
-            .solid
-            .step(dt, settings.gravity, query, &mut reactions)
-        {
+        if let Err(e) = body.solid.step(dt, settings.gravity, query, &mut reactions) {
             errors.raise(format!("solid {:?}: {e}", body.entity));
         }
     }

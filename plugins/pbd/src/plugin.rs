@@ -169,8 +169,7 @@ impl Plugin for PbdPlugin {
         app.register_body_kind(Arc::new(ClothKind));
         app.add_systems(
             modesuite_engine::Substep,
-            pbd_step
-                .in_set(DeformableSystems::Cloth),
+            pbd_step.in_set(DeformableSystems::Cloth),
         );
         app.add_systems(
             modesuite_engine::PhysicsStep,
@@ -195,14 +194,10 @@ impl BodyKind for ClothKind {
         let path = format!("{}.body.params", ctx.path);
         let params: ClothParams = modesuite_engine::scene::ron_options()
             .from_str(ctx.params_ron)
-            .map_err(|e| {
-                plugin_params_error(ctx.source, ctx.params_ron, &path, &e)
-            })?;
-        let surface = ctx
-            .object
-            .shape
-            .surface(ctx.shapes)
-            .map_err(|e| SceneError::semantic(format!("{}.shape", ctx.path), "(shape)", e.to_string()))?;
+            .map_err(|e| plugin_params_error(ctx.source, ctx.params_ron, &path, &e))?;
+        let surface = ctx.object.shape.surface(ctx.shapes).map_err(|e| {
+            SceneError::semantic(format!("{}.shape", ctx.path), "(shape)", e.to_string())
+        })?;
         if surface.triangles.is_empty() {
             return Err(SceneError::semantic(
                 format!("{}.shape", ctx.path),
@@ -267,12 +262,22 @@ impl BodyKind for ClothKind {
         Ok(Arc::new(compiled))
     }
 
-    fn spawn(&self, app: &mut SimApp, entity: Entity, body: &CompiledBody) -> Result<(), SceneError> {
+    fn spawn(
+        &self,
+        app: &mut SimApp,
+        entity: Entity,
+        body: &CompiledBody,
+    ) -> Result<(), SceneError> {
         let c = body.downcast_ref::<CompiledCloth>().ok_or_else(|| {
-            SceneError::semantic("pbd.cloth", "(compiled body)", "a body compiled by pbd.cloth")
+            SceneError::semantic(
+                "pbd.cloth",
+                "(compiled body)",
+                "a body compiled by pbd.cloth",
+            )
         })?;
         let err = |e: crate::PbdError| SceneError::semantic("pbd.cloth", "(spawn)", e.to_string());
-        let mut cloth = Cloth::new(&c.positions, &c.triangles, c.material, c.settings).map_err(err)?;
+        let mut cloth =
+            Cloth::new(&c.positions, &c.triangles, c.material, c.settings).map_err(err)?;
         for pin in &c.pins {
             cloth.pin_to_world(pin).map_err(err)?;
         }

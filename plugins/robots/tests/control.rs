@@ -11,7 +11,11 @@ use modesuite_robots::{BaseVelocity, HolonomicBase, JointController, RobotKind};
 
 /// Steps the Franka arm from home to home + `delta` on every arm joint and returns, per joint,
 /// (error at 1 s, overshoot fraction, settling time into 0.01 rad in s).
-fn franka_step_response(gravity_compensation: bool, delta: f64) -> Vec<(String, f64, f64, f64)> {
+fn franka_step_response(
+    gravity_compensation: bool,
+    delta: f64,
+    substeps_per_apply: usize,
+) -> Vec<(String, f64, f64, f64)> {
     let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
     let arm = spec.indices(&robot, spec.arm_joints).unwrap();
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
@@ -38,7 +42,9 @@ fn franka_step_response(gravity_compensation: bool, delta: f64) -> Vec<(String, 
     let mut settle = vec![0.0f64; arm.len()];
     let steps = (1.0 / DT).round() as usize;
     for s in 0..steps {
-        ctl.apply(&robot, &mut ctx).unwrap();
+        if s % substeps_per_apply == 0 {
+            ctl.apply(&robot, &mut ctx).unwrap();
+        }
         ctx.step(DT).unwrap();
         let q = robot.joint_positions(&ctx).unwrap();
         for (k, &i) in arm.iter().enumerate() {
@@ -66,8 +72,18 @@ fn franka_step_response(gravity_compensation: bool, delta: f64) -> Vec<(String, 
 #[test]
 fn franka_pd_tracking_with_gravity_compensation() {
     let delta = 0.3;
-    let with = franka_step_response(true, delta);
-    let without = franka_step_response(false, delta);
+    let with = franka_step_response(true, delta, 1);
+    let without = franka_step_response(false, delta, 1);
+    // The controller applied once per 60 Hz control step (4 substeps) instead of every substep.
+    let at_60hz = franka_step_response(true, delta, 4);
+    let e60 = at_60hz.iter().map(|r| r.1).fold(0.0, f64::max);
+    let o60 = at_60hz.iter().map(|r| r.2).fold(0.0, f64::max);
+    let t60 = at_60hz.iter().map(|r| r.3).fold(0.0, f64::max);
+    println!(
+        "controller at 60 Hz (every 4th substep): worst error {e60:.5} rad, overshoot {:.2} %, settling {t60:.3} s",
+        o60 * 100.0
+    );
+    assert!(e60 <= 0.01 && o60 <= 0.10 && t60 < 1.0);
     println!("step of {delta} rad on every arm joint, measured 1 s after the step:");
     println!("joint          | error (tol 0.01 rad) | overshoot (tol 10 %) | settled to 0.01 rad after (tol 1 s) | error without gravity comp.");
     for ((name, e, o, ts), (_, e0, _, _)) in with.iter().zip(&without) {
@@ -190,4 +206,29 @@ fn spot_stands_on_its_legs() {
     assert!((pose.translation.z - 0.55).abs() <= 0.03);
     assert!(roll.abs() <= 0.05 && pitch.abs() <= 0.05);
     assert!(drift <= 0.05);
+}
+
+#[test]
+fn franka_gripper_mimic_fingers_close_together() {
+    let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
+    let f1 = robot.joint_index(spec.gripper_joints[0]).unwrap();
+    let f2 = robot.joint_index(spec.gripper_joints[1]).unwrap();
+    let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
+    // Only the leading finger is commanded; the mimic finger follows it.
+    ctl.set_position(&robot, f1, spec.gripper_open_closed.1)
+        .unwrap();
+    let mut worst_gap = 0.0f64;
+    for _ in 0..(0.5 / DT).round() as usize {
+        ctl.apply(&robot, &mut ctx).unwrap();
+        ctx.step(DT).unwrap();
+        let q = robot.joint_positions(&ctx).unwrap();
+        worst_gap = worst_gap.max((q[f1] - q[f2]).abs());
+    }
+    let q = robot.joint_positions(&ctx).unwrap();
+    println!(
+        "gripper after 0.5 s closing from 0.04 m: fingers {:.5} / {:.5} m (tol 0.001 of 0), largest finger mismatch on the way {worst_gap:.5} m (tol 0.002)",
+        q[f1], q[f2]
+    );
+    assert!(q[f1].abs() <= 1e-3 && q[f2].abs() <= 1e-3);
+    assert!(worst_gap <= 2e-3);
 }
