@@ -1,36 +1,9 @@
 //! The cloth example scenes stay stable for 60 s of simulated time.
 
-use modesuite::engine::scene;
+mod common;
+
+use common::{nodes, run_scene as run};
 use modesuite::pbd::PbdContext;
-use modesuite::prelude::*;
-
-fn run(file: &str, steps: u64) -> Env {
-    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(file);
-    let (desc, source) = scene::load_file(&path).unwrap();
-    let mut app = modesuite::cli::default_app();
-    let model = app.compile_scene(&desc, &source).unwrap();
-    app.spawn_scene(model).unwrap();
-    let mut env = Env::new(app);
-    env.autoreset = false;
-    env.reset(Some(0));
-    for i in 0..steps {
-        let o = env.step(&[]);
-        assert!(
-            o.info.error.is_none(),
-            "{file} step {i}: {:?}",
-            o.info.error
-        );
-    }
-    env
-}
-
-fn nodes(env: &mut Env, name: &str) -> Vec<nalgebra::Vector3<f64>> {
-    let mut q = env.app.world.query::<(&Object, &DeformableNodes)>();
-    q.iter(&env.app.world)
-        .find(|(o, _)| o.name == name)
-        .map(|(_, n)| n.0.clone())
-        .unwrap()
-}
 
 #[test]
 fn cloth_drapes_over_the_table_and_comes_to_rest_in_60_s() {
@@ -42,8 +15,8 @@ fn cloth_drapes_over_the_table_and_comes_to_rest_in_60_s() {
         .filter(|p| p.x.abs() < 0.4 && p.y.abs() < 0.3 && p.z < 0.75 - 1e-4)
         .count();
     let top = n.iter().map(|p| p.z).fold(f64::MIN, f64::max);
-    let ke = env.app.world.resource::<PbdContext>().cloths[0]
-        .cloth
+    let ke = env.app.world.resource::<PbdContext>().bodies[0]
+        .solver
         .kinetic_energy();
     println!("after 60 s: {inside} particles inside the table (0), top z {top:.4} (table 0.75 + 0.002), kinetic energy {ke:.2e} J (< 1e-4)");
     assert_eq!(inside, 0);

@@ -1,37 +1,10 @@
 //! The FEM example scenes: the clamped reference rod sags as beam theory says and stays stable
 //! for 60 s; the dropped torus comes to rest on the ground.
 
-use modesuite::engine::scene;
+mod common;
+
+use common::{nodes, run_scene as run};
 use modesuite::fem::FemContext;
-use modesuite::prelude::*;
-
-fn run(file: &str, steps: u64) -> Env {
-    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(file);
-    let (desc, source) = scene::load_file(&path).unwrap();
-    let mut app = modesuite::cli::default_app();
-    let model = app.compile_scene(&desc, &source).unwrap();
-    app.spawn_scene(model).unwrap();
-    let mut env = Env::new(app);
-    env.autoreset = false;
-    env.reset(Some(0));
-    for i in 0..steps {
-        let o = env.step(&[]);
-        assert!(
-            o.info.error.is_none(),
-            "{file} step {i}: {:?}",
-            o.info.error
-        );
-    }
-    env
-}
-
-fn nodes(env: &mut Env, name: &str) -> Vec<nalgebra::Vector3<f64>> {
-    let mut q = env.app.world.query::<(&Object, &DeformableNodes)>();
-    q.iter(&env.app.world)
-        .find(|(o, _)| o.name == name)
-        .map(|(_, n)| n.0.clone())
-        .unwrap()
-}
 
 #[test]
 fn clamped_rod_sags_like_a_beam_and_is_stable_for_60_s() {
@@ -40,7 +13,7 @@ fn clamped_rod_sags_like_a_beam_and_is_stable_for_60_s() {
     assert!(n.iter().all(|p| p.iter().all(|x| x.is_finite())));
     // Tip: the mean height of the nodes of the free end face (rest x = 1.0).
     let ctx = env.app.world.resource::<FemContext>();
-    let solid = &ctx.solids[0].solid;
+    let solid = &ctx.bodies[0].solver;
     let tip: Vec<usize> = solid
         .rest_positions()
         .iter()
@@ -71,8 +44,8 @@ fn dropped_torus_comes_to_rest_on_the_ground() {
     let n = nodes(&mut env, "torus");
     let zmin = n.iter().map(|p| p.z).fold(f64::MAX, f64::min);
     let zmax = n.iter().map(|p| p.z).fold(f64::MIN, f64::max);
-    let ke = env.app.world.resource::<FemContext>().solids[0]
-        .solid
+    let ke = env.app.world.resource::<FemContext>().bodies[0]
+        .solver
         .kinetic_energy();
     println!("after 10 s: torus z in [{zmin:.4}, {zmax:.4}] m (lying flat: [0, ~0.08]), kinetic energy {ke:.2e} J (< 1e-4)");
     assert!(zmin > -1e-3, "no penetration beyond 1 mm");

@@ -31,6 +31,7 @@ pub mod app;
 pub mod bench;
 pub mod components;
 pub mod coupling;
+pub mod deformable;
 pub mod dump;
 pub mod env;
 pub mod math;

@@ -139,7 +139,7 @@ impl crate::shapes::ShapeGenerators for Registry {
         match self.shapes.get(name) {
             Some(g) => g.generate(params_ron, want),
             None => Err(format!(
-                "unknown shape generator \"{name}\"; registered: [{}]",
+                "unknown shape generator \"{name}\"; registered: [{}]; a generator from a compiled plugin needs `--plugin PATH`",
                 self.shapes.keys().cloned().collect::<Vec<_>>().join(", ")
             )),
         }

@@ -127,3 +127,33 @@ pub fn poke_app_desc(desc: &SceneDesc, source: &SceneSource, poison_at: Option<u
 pub fn drop_scene() -> PathBuf {
     root().join("scenes/examples/drop.scene.ron")
 }
+
+/// Runs a scene file for `steps` env steps without autoreset, asserting no step fails.
+pub fn run_scene(file: &str, steps: u64) -> Env {
+    let path = root().join(file);
+    let (desc, source) = modesuite::engine::scene::load_file(&path).unwrap();
+    let mut app = modesuite::cli::default_app();
+    let model = app.compile_scene(&desc, &source).unwrap();
+    app.spawn_scene(model).unwrap();
+    let mut env = Env::new(app);
+    env.autoreset = false;
+    env.reset(Some(0));
+    for i in 0..steps {
+        let o = env.step(&[]);
+        assert!(
+            o.info.error.is_none(),
+            "{file} step {i}: {:?}",
+            o.info.error
+        );
+    }
+    env
+}
+
+/// The node positions of a deformable object by name.
+pub fn nodes(env: &mut Env, name: &str) -> Vec<nalgebra::Vector3<f64>> {
+    let mut q = env.app.world.query::<(&Object, &DeformableNodes)>();
+    q.iter(&env.app.world)
+        .find(|(o, _)| o.name == name)
+        .map(|(_, n)| n.0.clone())
+        .unwrap()
+}

@@ -18,18 +18,15 @@
 //! shared by every env through `Arc`; each env's [`FemContext`] holds only the state, which is
 //! part of the snapshot.
 
-use std::any::Any;
 use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
-use modesuite_engine::app::SimErrors;
-use modesuite_engine::components::DeformableNodes;
-use modesuite_engine::coupling::{ContactQuery, NoColliders, Reaction};
+use modesuite_engine::coupling::{ContactQuery, Reaction};
+use modesuite_engine::deformable::{add_deformable_systems, DeformableContext, DeformableSolver};
 use modesuite_engine::registry::{BodyCompileContext, BodyKind, CompiledBody};
 use modesuite_engine::scene::{plugin_params_error, ron_options, NodeSelect, SceneError};
-use modesuite_engine::state::{StateHasher, Stateful};
-use modesuite_engine::{DeformableSystems, Plugin, RigidContext, SimApp, SimSettings};
-use nalgebra::Point3;
+use modesuite_engine::{DeformableSystems, Plugin, SimApp};
+use nalgebra::{Point3, Vector3};
 use serde::Deserialize;
 
 use crate::{FemConfig, FemSolid, Material, SolidModel};
@@ -66,64 +63,29 @@ pub struct CompiledSolid {
     pub fixed: Vec<u32>,
 }
 
-/// One solid in an env.
-pub struct SolidBody {
-    /// The scene object.
-    pub entity: Entity,
-    /// The solver state.
-    pub solid: FemSolid,
-}
+/// Every solid of one env (part of the env state).
+pub type FemContext = DeformableContext<FemSolid>;
 
-/// Every solid of one env (a resource, part of the env state).
-#[derive(Resource, Default)]
-pub struct FemContext {
-    /// Solids in spawn order.
-    pub solids: Vec<SolidBody>,
-}
-
-impl FemContext {
-    /// The solid of an entity.
-    pub fn solid_of(&self, entity: Entity) -> Option<&FemSolid> {
-        self.solids
-            .iter()
-            .find(|s| s.entity == entity)
-            .map(|s| &s.solid)
+impl DeformableSolver for FemSolid {
+    fn step_coupled(
+        &mut self,
+        dt: f64,
+        gravity: &Vector3<f64>,
+        query: &dyn ContactQuery,
+        reactions: &mut Vec<Reaction>,
+    ) -> Result<(), String> {
+        self.step(dt, *gravity, query, reactions)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
     }
-
-    /// The solid of an entity, mutable (grasps, attachments).
-    pub fn solid_of_mut(&mut self, entity: Entity) -> Option<&mut FemSolid> {
-        self.solids
-            .iter_mut()
-            .find(|s| s.entity == entity)
-            .map(|s| &mut s.solid)
+    fn node_positions(&self) -> &[Vector3<f64>] {
+        self.positions()
     }
-}
-
-impl Stateful for FemContext {
-    fn save_state(&self) -> Box<dyn Any + Send + Sync> {
-        Box::new(
-            self.solids
-                .iter()
-                .map(|s| s.solid.get_state())
-                .collect::<Vec<_>>(),
-        )
+    fn save(&self) -> Vec<f64> {
+        self.get_state()
     }
-
-    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) {
-        if let Some(states) = state.downcast_ref::<Vec<Vec<f64>>>() {
-            for (s, st) in self.solids.iter_mut().zip(states) {
-                // A state taken from this same context always has the right size.
-                let _ = s.solid.set_state(st);
-            }
-        }
-    }
-
-    fn hash_state(&self, h: &mut StateHasher) {
-        for s in &self.solids {
-            for x in s.solid.get_state() {
-                h.write_f64(x);
-            }
-        }
+    fn load(&mut self, state: &[f64]) -> Result<(), String> {
+        self.set_state(state).map_err(|e| e.to_string())
     }
 }
 
@@ -136,18 +98,8 @@ impl Plugin for FemPlugin {
     }
 
     fn build(&self, app: &mut SimApp) {
-        app.insert_resource(FemContext::default());
-        app.register_stateful::<FemContext>();
-        app.register_stateful_component::<DeformableNodes>();
+        add_deformable_systems::<FemSolid>(app, DeformableSystems::Elastic);
         app.register_body_kind(Arc::new(SolidKind));
-        app.add_systems(
-            modesuite_engine::Substep,
-            fem_step.in_set(DeformableSystems::Elastic),
-        );
-        app.add_systems(
-            modesuite_engine::PhysicsStep,
-            fem_writeback.in_set(DeformableSystems::Elastic),
-        );
     }
 }
 
@@ -241,49 +193,7 @@ impl BodyKind for SolidKind {
                 .fix_nodes(&c.fixed)
                 .map_err(|e| SceneError::semantic("fem.solid", "(fixed)", e.to_string()))?;
         }
-        app.world
-            .entity_mut(entity)
-            .insert(DeformableNodes(solid.positions().to_vec()));
-        app.world
-            .resource_mut::<FemContext>()
-            .solids
-            .push(SolidBody { entity, solid });
+        FemContext::spawn_into(app, entity, solid);
         Ok(())
-    }
-}
-
-fn fem_step(
-    mut ctx: ResMut<FemContext>,
-    rigid: Option<ResMut<RigidContext>>,
-    settings: Res<SimSettings>,
-    mut errors: ResMut<SimErrors>,
-) {
-    let dt = settings.substep_dt();
-    let mut reactions: Vec<Reaction> = Vec::new();
-    let mut rigid = rigid;
-    for body in &mut ctx.solids {
-        let query: &dyn ContactQuery = match rigid.as_deref() {
-            Some(r) => r,
-            None => &NoColliders,
-        };
-        if let Err(e) = body.solid.step(dt, settings.gravity, query, &mut reactions) {
-            errors.raise(format!("solid {:?}: {e}", body.entity));
-        }
-    }
-    if let Some(r) = rigid.as_deref_mut() {
-        for re in reactions {
-            if re.body != u32::MAX {
-                r.push_reaction(re);
-            }
-        }
-    }
-}
-
-fn fem_writeback(ctx: Res<FemContext>, mut q: Query<&mut DeformableNodes>) {
-    for body in &ctx.solids {
-        if let Ok(mut nodes) = q.get_mut(body.entity) {
-            nodes.0.clear();
-            nodes.0.extend_from_slice(body.solid.positions());
-        }
     }
 }

@@ -17,18 +17,15 @@
 //! runs once per engine substep in `SubstepSystems::Solve`, before the rigid step, queries the
 //! rigid world through the engine's coupling API and pushes its reactions to the rigid bodies.
 
-use std::any::Any;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
-use modesuite_engine::app::SimErrors;
-use modesuite_engine::components::DeformableNodes;
-use modesuite_engine::coupling::{ContactQuery, NoColliders, Reaction};
+use modesuite_engine::coupling::{ContactQuery, Reaction};
+use modesuite_engine::deformable::{add_deformable_systems, DeformableContext, DeformableSolver};
 use modesuite_engine::registry::{BodyCompileContext, BodyKind, CompiledBody};
 use modesuite_engine::scene::{plugin_params_error, NodeSelect, SceneError};
-use modesuite_engine::state::{StateHasher, Stateful};
-use modesuite_engine::{DeformableSystems, Plugin, RigidContext, SimApp, SimSettings};
+use modesuite_engine::{DeformableSystems, Plugin, SimApp};
 use nalgebra::{Point3, Vector3};
 use serde::Deserialize;
 
@@ -93,64 +90,29 @@ pub struct CompiledCloth {
     pub groups: Vec<(String, Vec<u32>)>,
 }
 
-/// One cloth in an env.
-pub struct ClothBody {
-    /// The scene object.
-    pub entity: Entity,
-    /// The solver.
-    pub cloth: Cloth,
-}
+/// Every cloth of one env (part of the env state).
+pub type PbdContext = DeformableContext<Cloth>;
 
-/// Every cloth of one env (a resource, part of the env state).
-#[derive(Resource, Default)]
-pub struct PbdContext {
-    /// Cloths in spawn order.
-    pub cloths: Vec<ClothBody>,
-}
-
-impl PbdContext {
-    /// The cloth of an entity.
-    pub fn cloth_of(&self, entity: Entity) -> Option<&Cloth> {
-        self.cloths
-            .iter()
-            .find(|c| c.entity == entity)
-            .map(|c| &c.cloth)
+impl DeformableSolver for Cloth {
+    fn step_coupled(
+        &mut self,
+        dt: f64,
+        gravity: &Vector3<f64>,
+        query: &dyn ContactQuery,
+        reactions: &mut Vec<Reaction>,
+    ) -> Result<(), String> {
+        self.step(dt, gravity, query, reactions)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
     }
-
-    /// The cloth of an entity, mutable (grasps, attachments).
-    pub fn cloth_of_mut(&mut self, entity: Entity) -> Option<&mut Cloth> {
-        self.cloths
-            .iter_mut()
-            .find(|c| c.entity == entity)
-            .map(|c| &mut c.cloth)
+    fn node_positions(&self) -> &[Vector3<f64>] {
+        self.positions()
     }
-}
-
-impl Stateful for PbdContext {
-    fn save_state(&self) -> Box<dyn Any + Send + Sync> {
-        Box::new(
-            self.cloths
-                .iter()
-                .map(|c| c.cloth.get_state())
-                .collect::<Vec<_>>(),
-        )
+    fn save(&self) -> Vec<f64> {
+        self.get_state()
     }
-
-    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) {
-        if let Some(states) = state.downcast_ref::<Vec<Vec<f64>>>() {
-            for (c, s) in self.cloths.iter_mut().zip(states) {
-                // A state taken from this same context always has the right size.
-                let _ = c.cloth.set_state(s);
-            }
-        }
-    }
-
-    fn hash_state(&self, h: &mut StateHasher) {
-        for c in &self.cloths {
-            for x in c.cloth.get_state() {
-                h.write_f64(x);
-            }
-        }
+    fn load(&mut self, state: &[f64]) -> Result<(), String> {
+        self.set_state(state).map_err(|e| e.to_string())
     }
 }
 
@@ -163,18 +125,8 @@ impl Plugin for PbdPlugin {
     }
 
     fn build(&self, app: &mut SimApp) {
-        app.insert_resource(PbdContext::default());
-        app.register_stateful::<PbdContext>();
-        app.register_stateful_component::<DeformableNodes>();
+        add_deformable_systems::<Cloth>(app, DeformableSystems::Cloth);
         app.register_body_kind(Arc::new(ClothKind));
-        app.add_systems(
-            modesuite_engine::Substep,
-            pbd_step.in_set(DeformableSystems::Cloth),
-        );
-        app.add_systems(
-            modesuite_engine::PhysicsStep,
-            pbd_writeback.in_set(DeformableSystems::Cloth),
-        );
     }
 }
 
@@ -284,49 +236,7 @@ impl BodyKind for ClothKind {
         for (name, g) in &c.groups {
             cloth.add_group(name, g).map_err(err)?;
         }
-        let nodes = DeformableNodes(cloth.positions().to_vec());
-        app.world.entity_mut(entity).insert(nodes);
-        app.world
-            .resource_mut::<PbdContext>()
-            .cloths
-            .push(ClothBody { entity, cloth });
+        PbdContext::spawn_into(app, entity, cloth);
         Ok(())
-    }
-}
-
-fn pbd_step(
-    mut ctx: ResMut<PbdContext>,
-    rigid: Option<ResMut<RigidContext>>,
-    settings: Res<SimSettings>,
-    mut errors: ResMut<SimErrors>,
-) {
-    let dt = settings.substep_dt();
-    let g = settings.gravity;
-    let mut reactions: Vec<Reaction> = Vec::new();
-    let mut rigid = rigid;
-    for body in &mut ctx.cloths {
-        let query: &dyn ContactQuery = match rigid.as_deref() {
-            Some(r) => r,
-            None => &NoColliders,
-        };
-        if let Err(e) = body.cloth.step(dt, &g, query, &mut reactions) {
-            errors.raise(format!("cloth {:?}: {e}", body.entity));
-        }
-    }
-    if let Some(r) = rigid.as_deref_mut() {
-        for re in reactions {
-            if re.body != u32::MAX {
-                r.push_reaction(re);
-            }
-        }
-    }
-}
-
-fn pbd_writeback(ctx: Res<PbdContext>, mut q: Query<&mut DeformableNodes>) {
-    for body in &ctx.cloths {
-        if let Ok(mut nodes) = q.get_mut(body.entity) {
-            nodes.0.clear();
-            nodes.0.extend_from_slice(body.cloth.positions());
-        }
     }
 }

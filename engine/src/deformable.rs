@@ -1,0 +1,173 @@
+//! Shared plumbing of deformable body kinds (FEM solids, cloth, third-party solvers).
+//!
+//! A solver implements [`DeformableSolver`]; its plugin keeps every body of an env in a
+//! [`DeformableContext`] (a stateful resource: snapshots, resets and hashes cover it) and adds the
+//! generic step and writeback systems with [`add_deformable_systems`]. The step runs once per
+//! engine substep inside the given [`DeformableSystems`] set (before the rigid step), queries the
+//! rigid world through the coupling API and pushes the solver's reactions to the rigid bodies;
+//! the writeback copies positions into each body's [`DeformableNodes`].
+
+use std::any::Any;
+
+use bevy_ecs::component::Mutable;
+use bevy_ecs::prelude::*;
+use nalgebra::Vector3;
+
+use crate::app::SimErrors;
+use crate::components::DeformableNodes;
+use crate::coupling::{ContactQuery, NoColliders, Reaction};
+use crate::rigid::{DeformableSystems, RigidContext};
+use crate::state::{StateHasher, Stateful};
+use crate::{SimApp, SimSettings};
+
+/// What the engine needs from a deformable solver.
+pub trait DeformableSolver: Send + Sync + 'static {
+    /// Advances by `dt` seconds under `gravity` (m/s^2, world frame), colliding with the rigid
+    /// world; appends the impulses it applied on rigid bodies. On failure the solver keeps a
+    /// finite state (rolled back) and returns the reason.
+    fn step_coupled(
+        &mut self,
+        dt: f64,
+        gravity: &Vector3<f64>,
+        query: &dyn ContactQuery,
+        reactions: &mut Vec<Reaction>,
+    ) -> Result<(), String>;
+    /// Current node or particle positions, m, world frame.
+    fn node_positions(&self) -> &[Vector3<f64>];
+    /// The complete state (bit-exact round trip with `load`).
+    fn save(&self) -> Vec<f64>;
+    /// Restores a state made by `save` of this same body.
+    fn load(&mut self, state: &[f64]) -> Result<(), String>;
+}
+
+/// One deformable body of an env.
+pub struct DeformableBody<S> {
+    /// The scene object.
+    pub entity: Entity,
+    /// The solver.
+    pub solver: S,
+}
+
+/// Every body of one solver type in one env (a resource, part of the env state).
+#[derive(Resource)]
+pub struct DeformableContext<S: DeformableSolver> {
+    /// Bodies in spawn order.
+    pub bodies: Vec<DeformableBody<S>>,
+}
+
+impl<S: DeformableSolver> Default for DeformableContext<S> {
+    fn default() -> Self {
+        Self { bodies: Vec::new() }
+    }
+}
+
+impl<S: DeformableSolver> DeformableContext<S> {
+    /// The solver of an entity.
+    pub fn get(&self, entity: Entity) -> Option<&S> {
+        self.bodies
+            .iter()
+            .find(|b| b.entity == entity)
+            .map(|b| &b.solver)
+    }
+
+    /// The solver of an entity, mutable (grasps, attachments).
+    pub fn get_mut(&mut self, entity: Entity) -> Option<&mut S> {
+        self.bodies
+            .iter_mut()
+            .find(|b| b.entity == entity)
+            .map(|b| &mut b.solver)
+    }
+
+    /// Adds a spawned body and gives its entity a [`DeformableNodes`] component.
+    pub fn spawn_into(app: &mut SimApp, entity: Entity, solver: S) {
+        app.world
+            .entity_mut(entity)
+            .insert(DeformableNodes(solver.node_positions().to_vec()));
+        app.world
+            .resource_mut::<Self>()
+            .bodies
+            .push(DeformableBody { entity, solver });
+    }
+}
+
+impl<S: DeformableSolver> Stateful for DeformableContext<S> {
+    fn save_state(&self) -> Box<dyn Any + Send + Sync> {
+        Box::new(
+            self.bodies
+                .iter()
+                .map(|b| b.solver.save())
+                .collect::<Vec<_>>(),
+        )
+    }
+
+    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) {
+        if let Some(states) = state.downcast_ref::<Vec<Vec<f64>>>() {
+            for (b, s) in self.bodies.iter_mut().zip(states) {
+                // A state saved from this same context always fits.
+                let _ = b.solver.load(s);
+            }
+        }
+    }
+
+    fn hash_state(&self, h: &mut StateHasher) {
+        for b in &self.bodies {
+            for x in b.solver.save() {
+                h.write_f64(x);
+            }
+        }
+    }
+}
+
+fn deformable_step<S: DeformableSolver>(
+    mut ctx: ResMut<DeformableContext<S>>,
+    mut rigid: Option<ResMut<RigidContext>>,
+    settings: Res<SimSettings>,
+    mut errors: ResMut<SimErrors>,
+    names: Query<&crate::components::Object>,
+) {
+    let dt = settings.substep_dt();
+    let mut reactions: Vec<Reaction> = Vec::new();
+    for body in &mut ctx.bodies {
+        let query: &dyn ContactQuery = match rigid.as_deref() {
+            Some(r) => r,
+            None => &NoColliders,
+        };
+        if let Err(e) = body
+            .solver
+            .step_coupled(dt, &settings.gravity, query, &mut reactions)
+        {
+            let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
+            errors.raise(format!("object \"{name}\": {e}"));
+        }
+    }
+    if let Some(r) = rigid.as_deref_mut() {
+        for re in reactions.into_iter().filter(|re| re.body != u32::MAX) {
+            r.push_reaction(re);
+        }
+    }
+}
+
+fn deformable_writeback<S: DeformableSolver>(
+    ctx: Res<DeformableContext<S>>,
+    mut q: Query<&mut DeformableNodes>,
+) {
+    for body in &ctx.bodies {
+        if let Ok(mut nodes) = q.get_mut(body.entity) {
+            nodes.0.clear();
+            nodes.0.extend_from_slice(body.solver.node_positions());
+        }
+    }
+}
+
+/// Inserts the context of solver type `S`, registers it (and [`DeformableNodes`]) as state, and
+/// adds its step (in `Substep`) and writeback (in `PhysicsStep`) systems to `set`.
+pub fn add_deformable_systems<S: DeformableSolver>(app: &mut SimApp, set: DeformableSystems)
+where
+    DeformableContext<S>: Component<Mutability = Mutable>,
+{
+    app.insert_resource(DeformableContext::<S>::default());
+    app.register_stateful::<DeformableContext<S>>();
+    app.register_stateful_component::<DeformableNodes>();
+    app.add_systems(crate::Substep, deformable_step::<S>.in_set(set.clone()));
+    app.add_systems(crate::PhysicsStep, deformable_writeback::<S>.in_set(set));
+}
