@@ -483,3 +483,37 @@ fn reactions_push_dynamic_bodies() {
     println!("velocity after a 0.4 N s impulse on 2 kg: {v:?} (expected 0.2 m/s along x)");
     assert!((f64::from(v.x) - 0.2).abs() < 1e-4);
 }
+
+#[test]
+fn reactions_do_not_erase_forces_set_by_controllers() {
+    use modesuite::engine::coupling::Reaction;
+    use modesuite::engine::math::vec_to_rapier;
+    let text = r#"Scene(physics: (gravity: (0.0, 0.0, 0.0), substeps: 4), objects: [
+        (name: "cube", shape: Box(size: (0.1, 0.1, 0.1)), body: Dynamic(mass: Some(1.0))),
+    ])"#;
+    let desc = scene::parse_str(text, "<t>").unwrap();
+    let mut app = modesuite::cli::default_app();
+    let model = app
+        .compile_scene(&desc, &SceneSource::in_memory("."))
+        .unwrap();
+    app.spawn_scene(model).unwrap();
+    let mut rigid = app.world.resource_mut::<RigidContext>();
+    let (h, _) = rigid.body_of_id(0).unwrap();
+    // A controller's persistent force of 1 N along y, and one reaction of 0.01 N s along x.
+    rigid.bodies[h].add_force(vec_to_rapier(&nalgebra::Vector3::new(0.0, 1.0, 0.0)), true);
+    rigid.push_reaction(Reaction {
+        body: 0,
+        point: nalgebra::Vector3::zeros(),
+        impulse: nalgebra::Vector3::new(0.01, 0.0, 0.0),
+    });
+    let dt = 0.25 / 60.0;
+    for _ in 0..4 {
+        rigid.step(dt).unwrap();
+    }
+    let v = rigid.bodies[h].linvel();
+    let f = rigid.bodies[h].user_force();
+    println!("after 4 substeps: v = {v:?} (x 0.01 from the reaction once, y 4 dt = {:.5}), force kept {f:?}", 4.0 * dt);
+    assert!((f64::from(v.x) - 0.01).abs() < 1e-6);
+    assert!((f64::from(v.y) - 4.0 * dt).abs() < 1e-6);
+    assert!((f64::from(f.y) - 1.0).abs() < 1e-6 && f.x.abs() < 1e-6);
+}

@@ -6,7 +6,8 @@
 //! rapier step runs once per substep in [`RigidSystems::Step`] inside `SubstepSystems::Solve`;
 //! deformable solvers order themselves `.before(RigidSystems::Step)` and push their
 //! [`Reaction`]s, which are applied as forces (F = J / dt) in that same step: rapier silently
-//! ignores impulses on multibody links, and forces and torques are both cleared after each step.
+//! ignores impulses on multibody links. After the step each touched body gets back exactly the
+//! force and torque it carried before (controllers' forces survive; reaction forces are removed).
 
 use std::any::Any;
 
@@ -253,17 +254,26 @@ impl RigidContext {
     pub fn step(&mut self, dt: f64) -> Result<(), String> {
         self.params.dt = dt as f32;
         let inv_dt = 1.0 / dt;
-        let mut touched = Vec::new();
+        // Bodies touched by reactions, with the force and torque they carried before (set by
+        // controllers, e.g. gravity compensation): restored after the step, so only the
+        // reaction forces are removed.
+        let mut touched: Vec<(
+            RigidBodyHandle,
+            rapier3d::math::Vector,
+            rapier3d::math::Vector,
+        )> = Vec::new();
         for r in self.pending.drain(..) {
             if let Some((h, _)) = self.body_ids.get(r.body as usize) {
                 if let Some(b) = self.bodies.get_mut(*h) {
                     if b.is_dynamic() {
+                        if !touched.iter().any(|(t, _, _)| t == h) {
+                            touched.push((*h, b.user_force(), b.user_torque()));
+                        }
                         b.add_force_at_point(
                             vec_to_rapier(&(r.impulse * inv_dt)),
                             vec_to_rapier(&r.point),
                             true,
                         );
-                        touched.push(*h);
                     }
                 }
             }
@@ -283,10 +293,12 @@ impl RigidContext {
             &(),
             &(),
         );
-        for h in touched {
+        for (h, force, torque) in touched {
             if let Some(b) = self.bodies.get_mut(h) {
                 b.reset_forces(false);
                 b.reset_torques(false);
+                b.add_force(force, false);
+                b.add_torque(torque, false);
             }
         }
         self.refresh_queries();
