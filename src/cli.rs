@@ -50,7 +50,7 @@ pub enum Command {
     },
     /// Run a scene file or a task id and report per-episode metrics.
     Run(RunArgs),
-    /// Run a benchmark suite: engine (more suites arrive with their plugins).
+    /// Run a benchmark suite: engine, fem, pbd (more suites arrive with their plugins).
     Bench {
         /// Suite name.
         name: String,
@@ -537,14 +537,16 @@ fn bench(
     let opts = BenchOptions { scale, threads };
     let records: Vec<BenchRecord> = match name {
         "engine" => modesuite_engine::bench::engine_cases(&opts).map_err(CliError::runtime)?,
-        "fem" | "pbd" | "robots" | "render" | "tasks" => {
+        "fem" => crate::benches::fem_cases(&opts).map_err(CliError::runtime)?,
+        "pbd" => crate::benches::pbd_cases(&opts).map_err(CliError::runtime)?,
+        "robots" | "render" | "tasks" => {
             return Err(CliError::input(format!(
-            "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine"
-        )))
+                "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine, fem, pbd"
+            )))
         }
         other => {
             return Err(CliError::input(format!(
-                "bench {other}: unknown suite; available: engine"
+                "bench {other}: unknown suite; available: engine, fem, pbd"
             )))
         }
     };

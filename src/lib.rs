@@ -12,6 +12,7 @@ pub use modesuite_engine::prelude;
 pub use modesuite_fem as fem;
 pub use modesuite_pbd as pbd;
 
+pub mod benches;
 pub mod cli;
 
 use std::sync::Arc;

@@ -193,3 +193,49 @@ fn default_command_runs_the_embedded_default() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("summary: 1 episodes"), "{text}");
 }
+
+#[test]
+fn bench_fem_and_pbd_json_have_their_keys() {
+    for (suite, cases, keys) in [
+        (
+            "fem",
+            &[
+                "rod_soft",
+                "rod_stiff",
+                "rod_stiff_peer_grid",
+                "rod_stiff_x16",
+            ][..],
+            &["tip_deflection_m", "theory_m", "nodes", "element_type"][..],
+        ),
+        (
+            "pbd",
+            &["cloth", "cloth_selfcollide", "cloth_x16"][..],
+            &["stretch_mean", "stretch_max", "particles_inside"][..],
+        ),
+    ] {
+        let out = modesuite()
+            .args(["bench", suite, "--json", "--scale", "0.01"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        for c in cases {
+            let l = lines
+                .iter()
+                .find(|l| l["case"] == *c)
+                .unwrap_or_else(|| panic!("{suite}: case {c} missing"));
+            for k in keys.iter().chain(["steps_per_s", "threads", "envs"].iter()) {
+                assert!(l.get(*k).is_some(), "{suite}/{c}: missing {k} in {l}");
+            }
+            println!("{l}");
+        }
+    }
+}

@@ -1,0 +1,188 @@
+//! The `modesuite bench fem` and `bench pbd` suites: the deformable solvers on the reference rod
+//! and the reference sheet (../shared/bench defines both), one thread, and 16 copies on one
+//! thread and on all threads.
+//!
+//! Extra JSON keys: FEM `tip_deflection_m` (nonlinear static solve; for `rod_stiff_x16` the
+//! dynamic tip of rod 0 at the end of the run), `tip_deflection_linear_m`,
+//! `theory_m` (Euler-Bernoulli q L^4 / 8 E I), `nodes`, `elements`, `element_type`; PBD
+//! `stretch_mean` (mean of L/L0 - 1), `stretch_max`, `particles_inside` (most particles deeper
+//! than 5 mm inside the cube at any checked step).
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use modesuite_engine::bench::{BenchOptions, BenchRecord};
+use modesuite_fem::bench::{
+    cantilever_theory, reference_rod, run_rod_bench, RodBench, ROD_POISSON,
+};
+use modesuite_fem::{FemConfig, NoContacts};
+use modesuite_pbd::bench::{reference_scene, run_reference, BenchConfig, REFERENCE_DT};
+use rayon::prelude::*;
+use serde_json::json;
+
+fn record(
+    case: &str,
+    steps_per_s: f64,
+    threads: usize,
+    envs: usize,
+    extra: BTreeMap<String, serde_json::Value>,
+) -> BenchRecord {
+    BenchRecord {
+        case: case.to_string(),
+        steps_per_s,
+        threads,
+        envs,
+        extra,
+    }
+}
+
+fn pool(threads: usize) -> Result<rayon::ThreadPool, String> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| e.to_string())
+}
+
+fn steps(base: f64, opts: &BenchOptions) -> usize {
+    ((base * opts.scale) as usize).max(5)
+}
+
+/// FEM cases: `rod_soft` (E 1e6), `rod_stiff` (E 1e8), both on the 10 x 1 x 1 grid (60 ten-node
+/// tets, within 5 % of beam theory), `rod_stiff_peer_grid` (the peers' 40 x 2 x 2 grid, 960 tets),
+/// `rod_stiff_x16` (16 rods, one thread and all threads).
+pub fn fem_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
+    let mut out = Vec::new();
+    for (case, e, cells, base) in [
+        ("rod_soft", 1e6, [10, 1, 1], 600.0),
+        ("rod_stiff", 1e8, [10, 1, 1], 600.0),
+        ("rod_stiff_peer_grid", 1e8, [40, 2, 2], 60.0),
+    ] {
+        let r = run_rod_bench(&RodBench {
+            youngs_modulus: e,
+            cells,
+            steps: steps(base, opts),
+            dt: 1.0 / 60.0,
+        })
+        .map_err(|e| format!("{case}: {e}"))?;
+        let mut extra = BTreeMap::new();
+        extra.insert(
+            "tip_deflection_m".into(),
+            json!(r.nonlinear_static_deflection),
+        );
+        extra.insert(
+            "tip_deflection_linear_m".into(),
+            json!(r.linear_static_deflection),
+        );
+        extra.insert("theory_m".into(), json!(r.theory));
+        extra.insert("nodes".into(), json!(r.nodes));
+        extra.insert("elements".into(), json!(r.elements));
+        extra.insert("element_type".into(), json!("tet10"));
+        out.push(record(case, r.steps_per_second, 1, 1, extra));
+    }
+    let n = steps(300.0, opts);
+    for threads in [1, opts.threads] {
+        let p = pool(threads)?;
+        let mut rods = (0..16)
+            .map(|_| reference_rod(1e8, ROD_POISSON, [10, 1, 1], FemConfig::default()))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| e.to_string())?;
+        let tip = rods[0].1;
+        let tip_rest = rods[0].0.embedded_position(&tip).z;
+        let g = nalgebra::Vector3::new(0.0, 0.0, -9.81);
+        let t = Instant::now();
+        p.install(|| {
+            rods.par_iter_mut().try_for_each(|(rod, _)| {
+                let mut reactions = Vec::new();
+                for _ in 0..n {
+                    reactions.clear();
+                    rod.step(1.0 / 60.0, g, &NoContacts, &mut reactions)?;
+                }
+                Ok::<_, modesuite_fem::FemError>(())
+            })
+        })
+        .map_err(|e| e.to_string())?;
+        let sps = (16 * n) as f64 / t.elapsed().as_secs_f64();
+        let mut extra = BTreeMap::new();
+        extra.insert("theory_m".into(), json!(cantilever_theory(1e8)));
+        // Dynamic: the tip of rod 0 at the end of the run (still swinging in short runs).
+        extra.insert(
+            "tip_deflection_m".into(),
+            json!(tip_rest - rods[0].0.embedded_position(&tip).z),
+        );
+        extra.insert("nodes".into(), json!(rods[0].0.n_nodes()));
+        extra.insert(
+            "elements".into(),
+            json!(rods[0].0.shared_model().n_elements()),
+        );
+        extra.insert("element_type".into(), json!("tet10"));
+        out.push(record(
+            "rod_stiff_x16",
+            sps,
+            p.current_num_threads(),
+            16,
+            extra,
+        ));
+        if p.current_num_threads() == 1 && threads != 1 {
+            break;
+        }
+    }
+    Ok(out)
+}
+
+/// PBD cases on the reference sheet: `cloth`, `cloth_selfcollide`, `cloth_x16` (16 sheets, one
+/// thread and all threads).
+pub fn pbd_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
+    let mut out = Vec::new();
+    for (case, sc) in [("cloth", false), ("cloth_selfcollide", true)] {
+        let cfg = BenchConfig {
+            steps: steps(600.0, opts),
+            ..BenchConfig::reference(sc)
+        };
+        let r = run_reference(&cfg).map_err(|e| format!("{case}: {e}"))?;
+        let mut extra = BTreeMap::new();
+        extra.insert("stretch_mean".into(), json!(r.stretch.mean));
+        extra.insert("stretch_max".into(), json!(r.stretch.max));
+        extra.insert("particles_inside".into(), json!(r.max_inside_cube));
+        out.push(record(case, r.steps_per_second, 1, 1, extra));
+    }
+    let n = steps(300.0, opts);
+    for threads in [1, opts.threads] {
+        let p = pool(threads)?;
+        let cfg = BenchConfig::reference(false);
+        let mut sheets = (0..16)
+            .map(|_| reference_scene(&cfg))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| e.to_string())?;
+        let g = nalgebra::Vector3::new(0.0, 0.0, -9.81);
+        let t = Instant::now();
+        p.install(|| {
+            sheets.par_iter_mut().try_for_each(|(cloth, cube)| {
+                let mut reactions = Vec::new();
+                for _ in 0..n {
+                    reactions.clear();
+                    cloth.step(REFERENCE_DT, &g, &*cube, &mut reactions)?;
+                }
+                Ok::<_, modesuite_pbd::PbdError>(())
+            })
+        })
+        .map_err(|e| e.to_string())?;
+        let sps = (16 * n) as f64 / t.elapsed().as_secs_f64();
+        let s = sheets[0].0.stretch_stats();
+        let mut extra = BTreeMap::new();
+        extra.insert("stretch_mean".into(), json!(s.mean));
+        extra.insert("stretch_max".into(), json!(s.max));
+        let inside = sheets
+            .iter()
+            .map(|(c, cube)| {
+                cube.count_inside(c.positions(), modesuite_pbd::bench::INSIDE_TOLERANCE)
+            })
+            .max()
+            .unwrap_or(0);
+        extra.insert("particles_inside".into(), json!(inside));
+        out.push(record("cloth_x16", sps, p.current_num_threads(), 16, extra));
+        if p.current_num_threads() == 1 && threads != 1 {
+            break;
+        }
+    }
+    Ok(out)
+}
