@@ -20,22 +20,6 @@ use modesuite_pbd::bench::{reference_scene, run_reference, BenchConfig, REFERENC
 use rayon::prelude::*;
 use serde_json::json;
 
-fn record(
-    case: &str,
-    steps_per_s: f64,
-    threads: usize,
-    envs: usize,
-    extra: BTreeMap<String, serde_json::Value>,
-) -> BenchRecord {
-    BenchRecord {
-        case: case.to_string(),
-        steps_per_s,
-        threads,
-        envs,
-        extra,
-    }
-}
-
 fn pool(threads: usize) -> Result<rayon::ThreadPool, String> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -77,7 +61,7 @@ pub fn fem_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         extra.insert("nodes".into(), json!(r.nodes));
         extra.insert("elements".into(), json!(r.elements));
         extra.insert("element_type".into(), json!("tet10"));
-        out.push(record(case, r.steps_per_second, 1, 1, extra));
+        out.push(BenchRecord::new(case, r.steps_per_second, 1, 1, extra));
     }
     let n = steps(300.0, opts);
     for threads in [1, opts.threads] {
@@ -115,7 +99,7 @@ pub fn fem_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             json!(rods[0].0.shared_model().n_elements()),
         );
         extra.insert("element_type".into(), json!("tet10"));
-        out.push(record(
+        out.push(BenchRecord::new(
             "rod_stiff_x16",
             sps,
             p.current_num_threads(),
@@ -143,7 +127,7 @@ pub fn pbd_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         extra.insert("stretch_mean".into(), json!(r.stretch.mean));
         extra.insert("stretch_max".into(), json!(r.stretch.max));
         extra.insert("particles_inside".into(), json!(r.max_inside_cube));
-        out.push(record(case, r.steps_per_second, 1, 1, extra));
+        out.push(BenchRecord::new(case, r.steps_per_second, 1, 1, extra));
     }
     let n = steps(300.0, opts);
     for threads in [1, opts.threads] {
@@ -179,7 +163,13 @@ pub fn pbd_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             .max()
             .unwrap_or(0);
         extra.insert("particles_inside".into(), json!(inside));
-        out.push(record("cloth_x16", sps, p.current_num_threads(), 16, extra));
+        out.push(BenchRecord::new(
+            "cloth_x16",
+            sps,
+            p.current_num_threads(),
+            16,
+            extra,
+        ));
         if p.current_num_threads() == 1 && threads != 1 {
             break;
         }

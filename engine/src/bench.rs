@@ -28,6 +28,23 @@ pub struct BenchRecord {
 }
 
 impl BenchRecord {
+    /// A record with the case's own figures.
+    pub fn new(
+        case: &str,
+        steps_per_s: f64,
+        threads: usize,
+        envs: usize,
+        extra: BTreeMap<String, Value>,
+    ) -> Self {
+        Self {
+            case: case.to_string(),
+            steps_per_s,
+            threads,
+            envs,
+            extra,
+        }
+    }
+
     /// As one JSON object (the `--json` line).
     pub fn to_json(&self) -> Value {
         let mut m = serde_json::Map::new();
@@ -128,11 +145,5 @@ pub fn engine_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
 fn record(case: &str, steps_per_s: f64, threads: usize, envs: usize) -> BenchRecord {
     let mut extra = BTreeMap::new();
     extra.insert("us_per_env_step".to_string(), json!(1e6 / steps_per_s));
-    BenchRecord {
-        case: case.to_string(),
-        steps_per_s,
-        threads,
-        envs,
-        extra,
-    }
+    BenchRecord::new(case, steps_per_s, threads, envs, extra)
 }
