@@ -27,6 +27,34 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool, String> {
         .map_err(|e| e.to_string())
 }
 
+/// The thread counts of the x16 cases: one, and all of `opts.threads` (0 = every core) when that
+/// is more than one.
+fn thread_counts(opts: &BenchOptions) -> Result<Vec<usize>, String> {
+    let all = pool(opts.threads)?.current_num_threads();
+    Ok(if all > 1 { vec![1, all] } else { vec![1] })
+}
+
+/// Steps every item `n` times on a pool of `threads` threads; returns item-steps per second.
+fn time_parallel<T: Send, E: std::fmt::Display + Send>(
+    threads: usize,
+    items: &mut [T],
+    n: usize,
+    step: impl Fn(&mut T) -> Result<(), E> + Sync,
+) -> Result<f64, String> {
+    let p = pool(threads)?;
+    let t = Instant::now();
+    p.install(|| {
+        items.par_iter_mut().try_for_each(|item| {
+            for _ in 0..n {
+                step(item)?;
+            }
+            Ok(())
+        })
+    })
+    .map_err(|e: E| e.to_string())?;
+    Ok((items.len() * n) as f64 / t.elapsed().as_secs_f64())
+}
+
 fn steps(base: f64, opts: &BenchOptions) -> usize {
     ((base * opts.scale) as usize).max(5)
 }
@@ -64,51 +92,33 @@ pub fn fem_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         out.push(BenchRecord::new(case, r.steps_per_second, 1, 1, extra));
     }
     let n = steps(300.0, opts);
-    for threads in [1, opts.threads] {
-        let p = pool(threads)?;
+    let g = nalgebra::Vector3::new(0.0, 0.0, -9.81);
+    for threads in thread_counts(opts)? {
         let mut rods = (0..16)
-            .map(|_| reference_rod(1e8, ROD_POISSON, [10, 1, 1], FemConfig::default()))
+            .map(|_| {
+                reference_rod(1e8, ROD_POISSON, [10, 1, 1], FemConfig::default())
+                    .map(|(rod, tip)| (rod, tip, Vec::new()))
+            })
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| e.to_string())?;
         let tip = rods[0].1;
         let tip_rest = rods[0].0.embedded_position(&tip).z;
-        let g = nalgebra::Vector3::new(0.0, 0.0, -9.81);
-        let t = Instant::now();
-        p.install(|| {
-            rods.par_iter_mut().try_for_each(|(rod, _)| {
-                let mut reactions = Vec::new();
-                for _ in 0..n {
-                    reactions.clear();
-                    rod.step(1.0 / 60.0, g, &NoContacts, &mut reactions)?;
-                }
-                Ok::<_, modesuite_fem::FemError>(())
-            })
-        })
-        .map_err(|e| e.to_string())?;
-        let sps = (16 * n) as f64 / t.elapsed().as_secs_f64();
+        let sps = time_parallel(threads, &mut rods, n, |(rod, _, reactions)| {
+            reactions.clear();
+            rod.step(1.0 / 60.0, g, &NoContacts, reactions).map(|_| ())
+        })?;
+        let rod = &rods[0].0;
         let mut extra = BTreeMap::new();
         extra.insert("theory_m".into(), json!(cantilever_theory(1e8)));
         // Dynamic: the tip of rod 0 at the end of the run (still swinging in short runs).
         extra.insert(
             "tip_deflection_m".into(),
-            json!(tip_rest - rods[0].0.embedded_position(&tip).z),
+            json!(tip_rest - rod.embedded_position(&tip).z),
         );
-        extra.insert("nodes".into(), json!(rods[0].0.n_nodes()));
-        extra.insert(
-            "elements".into(),
-            json!(rods[0].0.shared_model().n_elements()),
-        );
+        extra.insert("nodes".into(), json!(rod.n_nodes()));
+        extra.insert("elements".into(), json!(rod.shared_model().n_elements()));
         extra.insert("element_type".into(), json!("tet10"));
-        out.push(BenchRecord::new(
-            "rod_stiff_x16",
-            sps,
-            p.current_num_threads(),
-            16,
-            extra,
-        ));
-        if p.current_num_threads() == 1 && threads != 1 {
-            break;
-        }
+        out.push(BenchRecord::new("rod_stiff_x16", sps, threads, 16, extra));
     }
     Ok(out)
 }
@@ -130,49 +140,30 @@ pub fn pbd_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         out.push(BenchRecord::new(case, r.steps_per_second, 1, 1, extra));
     }
     let n = steps(300.0, opts);
-    for threads in [1, opts.threads] {
-        let p = pool(threads)?;
+    let g = nalgebra::Vector3::new(0.0, 0.0, -9.81);
+    for threads in thread_counts(opts)? {
         let cfg = BenchConfig::reference(false);
         let mut sheets = (0..16)
-            .map(|_| reference_scene(&cfg))
+            .map(|_| reference_scene(&cfg).map(|(cloth, cube)| (cloth, cube, Vec::new())))
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| e.to_string())?;
-        let g = nalgebra::Vector3::new(0.0, 0.0, -9.81);
-        let t = Instant::now();
-        p.install(|| {
-            sheets.par_iter_mut().try_for_each(|(cloth, cube)| {
-                let mut reactions = Vec::new();
-                for _ in 0..n {
-                    reactions.clear();
-                    cloth.step(REFERENCE_DT, &g, &*cube, &mut reactions)?;
-                }
-                Ok::<_, modesuite_pbd::PbdError>(())
-            })
-        })
-        .map_err(|e| e.to_string())?;
-        let sps = (16 * n) as f64 / t.elapsed().as_secs_f64();
+        let sps = time_parallel(threads, &mut sheets, n, |(cloth, cube, reactions)| {
+            reactions.clear();
+            cloth.step(REFERENCE_DT, &g, &*cube, reactions).map(|_| ())
+        })?;
         let s = sheets[0].0.stretch_stats();
-        let mut extra = BTreeMap::new();
-        extra.insert("stretch_mean".into(), json!(s.mean));
-        extra.insert("stretch_max".into(), json!(s.max));
         let inside = sheets
             .iter()
-            .map(|(c, cube)| {
+            .map(|(c, cube, _)| {
                 cube.count_inside(c.positions(), modesuite_pbd::bench::INSIDE_TOLERANCE)
             })
             .max()
             .unwrap_or(0);
+        let mut extra = BTreeMap::new();
+        extra.insert("stretch_mean".into(), json!(s.mean));
+        extra.insert("stretch_max".into(), json!(s.max));
         extra.insert("particles_inside".into(), json!(inside));
-        out.push(BenchRecord::new(
-            "cloth_x16",
-            sps,
-            p.current_num_threads(),
-            16,
-            extra,
-        ));
-        if p.current_num_threads() == 1 && threads != 1 {
-            break;
-        }
+        out.push(BenchRecord::new("cloth_x16", sps, threads, 16, extra));
     }
     Ok(out)
 }

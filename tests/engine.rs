@@ -5,7 +5,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{drop_scene, poke_app, poke_app_desc, root};
+use common::{app_from_ron, drop_scene, poke_app, poke_app_desc, root};
 use modesuite::engine::scene::{self, SceneError};
 use modesuite::engine::state::Snapshot;
 use modesuite::prelude::*;
@@ -143,12 +143,7 @@ fn schedules_have_no_ambiguities() {
 #[test]
 fn decimation_and_substeps_are_counted() {
     let text = r#"Scene(physics: (dt: 0.01, substeps: 3, decimation: 4))"#;
-    let desc = scene::parse_str(text, "<t>").unwrap();
-    let mut app = modesuite::cli::default_app();
-    let model = app
-        .compile_scene(&desc, &SceneSource::in_memory("."))
-        .unwrap();
-    app.spawn_scene(model).unwrap();
+    let mut app = app_from_ron(text);
     for _ in 0..5 {
         app.step();
     }
@@ -419,12 +414,7 @@ fn coupling_query_finds_closest_points_normals_and_bodies() {
         (name: "ground", shape: Plane(size: (4.0, 4.0)), body: Static),
         (name: "cube", shape: Box(size: (0.5, 0.5, 0.5)), pose: (pos: (0.0, 0.0, 1.0)), body: Dynamic()),
     ])"#;
-    let desc = scene::parse_str(text, "<t>").unwrap();
-    let mut app = modesuite::cli::default_app();
-    let model = app
-        .compile_scene(&desc, &SceneSource::in_memory("."))
-        .unwrap();
-    app.spawn_scene(model).unwrap();
+    let app = app_from_ron(text);
     let rigid = app.world.resource::<RigidContext>();
     let mut out = Vec::new();
     // Above the cube's top face (z = 1.25), before any step.
@@ -461,12 +451,7 @@ fn reactions_push_dynamic_bodies() {
     let text = r#"Scene(physics: (gravity: (0.0, 0.0, 0.0)), objects: [
         (name: "cube", shape: Box(size: (0.1, 0.1, 0.1)), body: Dynamic(mass: Some(2.0))),
     ])"#;
-    let desc = scene::parse_str(text, "<t>").unwrap();
-    let mut app = modesuite::cli::default_app();
-    let model = app
-        .compile_scene(&desc, &SceneSource::in_memory("."))
-        .unwrap();
-    app.spawn_scene(model).unwrap();
+    let mut app = app_from_ron(text);
     {
         let mut rigid = app.world.resource_mut::<RigidContext>();
         rigid.push_reaction(Reaction {
@@ -491,12 +476,7 @@ fn reactions_do_not_erase_forces_set_by_controllers() {
     let text = r#"Scene(physics: (gravity: (0.0, 0.0, 0.0), substeps: 4), objects: [
         (name: "cube", shape: Box(size: (0.1, 0.1, 0.1)), body: Dynamic(mass: Some(1.0))),
     ])"#;
-    let desc = scene::parse_str(text, "<t>").unwrap();
-    let mut app = modesuite::cli::default_app();
-    let model = app
-        .compile_scene(&desc, &SceneSource::in_memory("."))
-        .unwrap();
-    app.spawn_scene(model).unwrap();
+    let mut app = app_from_ron(text);
     let mut rigid = app.world.resource_mut::<RigidContext>();
     let (h, _) = rigid.body_of_id(0).unwrap();
     // A controller's persistent force of 1 N along y, and one reaction of 0.01 N s along x.

@@ -36,6 +36,24 @@ pub struct BodyCompileContext<'a> {
     pub source: &'a crate::scene::SceneSource,
 }
 
+impl BodyCompileContext<'_> {
+    /// Parses the object's `params` into the plugin's type with the scene's RON options; errors
+    /// name `objects[i] "name".body.params` and, when the text can be found in the scene file,
+    /// its line and column.
+    pub fn parse_params<T: serde::de::DeserializeOwned>(&self) -> Result<T, SceneError> {
+        crate::scene::ron_options()
+            .from_str(self.params_ron)
+            .map_err(|e| {
+                crate::scene::plugin_params_error(
+                    self.source,
+                    self.params_ron,
+                    &format!("{}.body.params", self.path),
+                    &e,
+                )
+            })
+    }
+}
+
 /// A kind of body provided by a plugin (FEM solid, cloth, ...).
 pub trait BodyKind: Send + Sync + 'static {
     /// Registry name, e.g. `fem.solid`.

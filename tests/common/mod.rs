@@ -157,3 +157,14 @@ pub fn nodes(env: &mut Env, name: &str) -> Vec<nalgebra::Vector3<f64>> {
         .map(|(_, n)| n.0.clone())
         .unwrap()
 }
+
+/// An app with the default plugins and a scene given as RON text (paths resolve against `.`).
+pub fn app_from_ron(text: &str) -> SimApp {
+    let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
+    let mut app = modesuite::cli::default_app();
+    let model = app
+        .compile_scene(&desc, &SceneSource::in_memory("."))
+        .unwrap();
+    app.spawn_scene(model).unwrap();
+    app
+}

@@ -24,7 +24,7 @@ use bevy_ecs::prelude::*;
 use modesuite_engine::coupling::{ContactQuery, Reaction};
 use modesuite_engine::deformable::{add_deformable_systems, DeformableContext, DeformableSolver};
 use modesuite_engine::registry::{BodyCompileContext, BodyKind, CompiledBody};
-use modesuite_engine::scene::{plugin_params_error, ron_options, NodeSelect, SceneError};
+use modesuite_engine::scene::{NodeSelect, SceneError};
 use modesuite_engine::{DeformableSystems, Plugin, SimApp};
 use nalgebra::{Point3, Vector3};
 use serde::Deserialize;
@@ -117,9 +117,7 @@ impl BodyKind for SolidKind {
 
     fn compile(&self, ctx: &BodyCompileContext) -> Result<CompiledBody, SceneError> {
         let path = format!("{}.body.params", ctx.path);
-        let params: SolidParams = ron_options()
-            .from_str(ctx.params_ron)
-            .map_err(|e| plugin_params_error(ctx.source, ctx.params_ron, &path, &e))?;
+        let params: SolidParams = ctx.parse_params()?;
         let density = params.density.unwrap_or(ctx.material.density);
         let material = Material::new(params.youngs_modulus, params.poisson_ratio, density)
             .map_err(|e| {

@@ -24,7 +24,7 @@ use bevy_ecs::prelude::*;
 use modesuite_engine::coupling::{ContactQuery, Reaction};
 use modesuite_engine::deformable::{add_deformable_systems, DeformableContext, DeformableSolver};
 use modesuite_engine::registry::{BodyCompileContext, BodyKind, CompiledBody};
-use modesuite_engine::scene::{plugin_params_error, NodeSelect, SceneError};
+use modesuite_engine::scene::{NodeSelect, SceneError};
 use modesuite_engine::{DeformableSystems, Plugin, SimApp};
 use nalgebra::{Point3, Vector3};
 use serde::Deserialize;
@@ -144,9 +144,7 @@ impl BodyKind for ClothKind {
 
     fn compile(&self, ctx: &BodyCompileContext) -> Result<CompiledBody, SceneError> {
         let path = format!("{}.body.params", ctx.path);
-        let params: ClothParams = modesuite_engine::scene::ron_options()
-            .from_str(ctx.params_ron)
-            .map_err(|e| plugin_params_error(ctx.source, ctx.params_ron, &path, &e))?;
+        let params: ClothParams = ctx.parse_params()?;
         let surface = ctx.object.shape.surface(ctx.shapes).map_err(|e| {
             SceneError::semantic(format!("{}.shape", ctx.path), "(shape)", e.to_string())
         })?;
