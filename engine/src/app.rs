@@ -470,6 +470,15 @@ impl SimApp {
         self
     }
 
+    /// Registers the handler of a plugin-owned scene section (`extensions: { "key": ... }`).
+    pub fn register_section(&mut self, section: impl crate::registry::SceneSection) -> &mut Self {
+        let section: Arc<dyn crate::registry::SceneSection> = Arc::new(section);
+        self.registry_mut()
+            .sections
+            .insert(section.name().to_string(), section);
+        self
+    }
+
     /// Registers a sensor type under its name.
     pub fn register_sensor(&mut self, sensor: crate::registry::SensorEntry) -> &mut Self {
         self.registry_mut()

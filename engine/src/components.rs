@@ -61,3 +61,24 @@ impl HashState for DeformableNodes {
         }
     }
 }
+
+/// Joint state of an articulated object (a robot), on its root entity: names, positions (rad
+/// or m) and velocities, written by the plugin that owns it in `Writeback`; what `--dump-state`
+/// reports under `joints` and observation terms read.
+#[derive(Component, Debug, Clone, PartialEq, Default)]
+pub struct JointState {
+    /// Joint names, in the owner's joint order.
+    pub names: std::sync::Arc<[String]>,
+    /// Positions, rad or m.
+    pub positions: Vec<f64>,
+    /// Velocities, rad/s or m/s.
+    pub velocities: Vec<f64>,
+}
+
+impl HashState for JointState {
+    fn hash_state(&self, h: &mut StateHasher) {
+        for x in self.positions.iter().chain(&self.velocities) {
+            h.write_f64(*x);
+        }
+    }
+}

@@ -49,3 +49,28 @@ pub struct NoColliders;
 impl ContactQuery for NoColliders {
     fn contacts_near(&self, _p: &Vector3<f64>, _max_distance: f64, _out: &mut Vec<PointContact>) {}
 }
+
+/// One gripper as the deformable plugins see it: the rigid body that holds, the finger volume
+/// (an oriented box in that body's frame), whether it is closed and the force it holds before
+/// the grasped material slips. Robots write it; deformables react to it (level-triggered: a
+/// closed gripper with no grasp grasps what is inside its volume, an open one releases), so
+/// snapshots and resets need no event bookkeeping.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GripperState {
+    /// Unique name, e.g. `robot/gripper`.
+    pub name: String,
+    /// Body id of the holding body (as in [`PointContact::body`]).
+    pub body: u32,
+    /// Pose of the finger volume's centre in the body frame.
+    pub volume_pose: nalgebra::Isometry3<f64>,
+    /// Half extents of the finger volume, m.
+    pub half_extents: Vector3<f64>,
+    /// Closed (grasping) or open.
+    pub closed: bool,
+    /// Total force the grasp transmits before it slips, N.
+    pub force_limit: f64,
+}
+
+/// Every gripper of an env (a resource written by the robots plugin in `ApplyActions`).
+#[derive(bevy_ecs::prelude::Resource, Debug, Clone, PartialEq, Default)]
+pub struct Grippers(pub Vec<GripperState>);

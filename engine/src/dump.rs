@@ -10,12 +10,14 @@
 //!            "nodes": [[x, y, z], ...]}}}
 //! ```
 //! Positions in metres, world frame (z up); `nodes` lists every FEM node or cloth particle.
+//! Robots appear as one entry per rapier body (`"robot/link"`, kind `robot.link`) and a root
+//! entry (kind `robot`) whose `joints` maps each joint name to `{"position", "velocity"}`.
 //! `objects` is keyed by object name (sorted); velocities only for rigid bodies.
 
 use bevy_ecs::prelude::*;
 use serde_json::{json, Map, Value};
 
-use crate::components::{DeformableNodes, Object, Pose, Velocity};
+use crate::components::{DeformableNodes, JointState, Object, Pose, Velocity};
 use crate::SimClock;
 
 fn v3(v: &nalgebra::Vector3<f64>) -> Value {
@@ -25,10 +27,14 @@ fn v3(v: &nalgebra::Vector3<f64>) -> Value {
 /// The state of every object of `world` as a `modesuite.state.v1` JSON value.
 pub fn dump_state(world: &World) -> Value {
     let mut items: Vec<(u32, String, Value)> = Vec::new();
-    if let Some(mut q) =
-        world.try_query::<(&Object, &Pose, Option<&Velocity>, Option<&DeformableNodes>)>()
-    {
-        for (obj, pose, vel, nodes) in q.iter(world) {
+    if let Some(mut q) = world.try_query::<(
+        &Object,
+        &Pose,
+        Option<&Velocity>,
+        Option<&DeformableNodes>,
+        Option<&JointState>,
+    )>() {
+        for (obj, pose, vel, nodes, joints) in q.iter(world) {
             let t = pose.0.translation.vector;
             let r = pose.0.rotation.quaternion();
             let mut m = Map::new();
@@ -41,6 +47,16 @@ pub fn dump_state(world: &World) -> Value {
             }
             if let Some(n) = nodes {
                 m.insert("nodes".into(), Value::Array(n.0.iter().map(v3).collect()));
+            }
+            if let Some(j) = joints {
+                let mut jm = Map::new();
+                for (i, name) in j.names.iter().enumerate() {
+                    jm.insert(
+                        name.clone(),
+                        json!({"position": j.positions[i], "velocity": j.velocities[i]}),
+                    );
+                }
+                m.insert("joints".into(), Value::Object(jm));
             }
             items.push((obj.index, obj.name.clone(), Value::Object(m)));
         }

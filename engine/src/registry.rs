@@ -71,6 +71,54 @@ pub trait BodyKind: Send + Sync + 'static {
     ) -> Result<(), SceneError>;
 }
 
+/// Compiled, immutable data of one plugin-owned scene section (shared between envs).
+pub type CompiledSection = Arc<dyn Any + Send + Sync>;
+
+/// What a scene section handler needs to compile its section of `extensions: { "key": ... }`.
+pub struct SectionCompileContext<'a> {
+    /// The section's key in `extensions`.
+    pub key: &'a str,
+    /// The section as RON text.
+    pub ron: &'a str,
+    /// Gravity and timing of the scene.
+    pub settings: &'a crate::SimSettings,
+    /// The scene's compiled objects (sections compile after the objects).
+    pub objects: &'a [crate::scene::ObjectModel],
+    /// Named frames and targets of the scene.
+    pub frames: &'a BTreeMap<String, nalgebra::Isometry3<f64>>,
+    /// Where the scene came from (errors map into the file).
+    pub source: &'a crate::scene::SceneSource,
+}
+
+impl SectionCompileContext<'_> {
+    /// Path of the section for error messages: `extensions["key"]`.
+    pub fn path(&self) -> String {
+        format!("extensions[\"{}\"]", self.key)
+    }
+
+    /// Parses the section into the handler's type with the scene's RON options; errors name
+    /// `extensions["key"]` and, when the text can be found in the scene file, its line and column.
+    pub fn parse<T: serde::de::DeserializeOwned>(&self) -> Result<T, SceneError> {
+        crate::scene::ron_options()
+            .from_str(self.ron)
+            .map_err(|e| crate::scene::plugin_params_error(self.source, self.ron, &self.path(), &e))
+    }
+}
+
+/// A handler of one plugin-owned scene section (`extensions: { "robots": (...) }`): validated at
+/// compile time like the rest of the scene, spawned into every env after the objects. A scene
+/// section no handler claims is an error, so a typo never passes silently.
+pub trait SceneSection: Send + Sync + 'static {
+    /// The key it handles, e.g. `robots`.
+    fn name(&self) -> &str;
+    /// One line for `modesuite list`.
+    fn description(&self) -> &str;
+    /// Parses and validates the section.
+    fn compile(&self, ctx: &SectionCompileContext) -> Result<CompiledSection, SceneError>;
+    /// Adds the section's content to an env's world (the scene's objects already exist).
+    fn spawn(&self, app: &mut SimApp, compiled: &CompiledSection) -> Result<(), SceneError>;
+}
+
 /// A named shape generator (RON: `Gen(name: "acme.trefoil", params: (...))`).
 pub trait ShapeGenerator: Send + Sync + 'static {
     /// Registry name.
@@ -145,6 +193,8 @@ pub struct Registry {
     pub robots: BTreeMap<String, RobotEntry>,
     /// Sensors by name.
     pub sensors: BTreeMap<String, SensorEntry>,
+    /// Scene section handlers by key.
+    pub sections: BTreeMap<String, Arc<dyn SceneSection>>,
 }
 
 impl crate::shapes::ShapeGenerators for Registry {

@@ -30,6 +30,9 @@ use crate::SimApp;
 pub enum RigidSystems {
     /// The rapier step (in `SubstepSystems::Solve`).
     Step,
+    /// Rigid poses and velocities copied to the components (in `PhysicsSystems::Writeback`);
+    /// plugins that also write `Pose` (robots' root entities) order themselves after it.
+    Writeback,
 }
 
 /// Deformable solvers inside `SubstepSystems::Solve`, chained in this order and all before
@@ -92,7 +95,9 @@ impl Plugin for RigidPlugin {
         app.add_systems(crate::Substep, rigid_step.in_set(RigidSystems::Step));
         app.add_systems(
             crate::PhysicsStep,
-            rigid_writeback.in_set(PhysicsSystems::Writeback),
+            rigid_writeback
+                .in_set(PhysicsSystems::Writeback)
+                .in_set(RigidSystems::Writeback),
         );
     }
 }

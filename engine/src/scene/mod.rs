@@ -208,10 +208,23 @@ pub struct SceneModel {
     pub episode_steps: Option<u64>,
     /// Plugin-owned scene sections, raw RON.
     pub extensions: BTreeMap<String, Box<RawValue>>,
+    /// The same sections compiled by their handlers, in key order (spawned after the objects).
+    pub sections: Vec<CompiledSceneSection>,
     /// One-line description.
     pub description: Option<String>,
     /// Where it came from.
     pub source: SceneSource,
+}
+
+/// One compiled plugin-owned scene section.
+#[derive(Clone)]
+pub struct CompiledSceneSection {
+    /// Its key in `extensions`.
+    pub key: String,
+    /// The handler that compiled it and spawns it.
+    pub handler: Arc<dyn crate::registry::SceneSection>,
+    /// Its compiled data.
+    pub compiled: crate::registry::CompiledSection,
 }
 
 /// Named world frames of the spawned scene (targets, markers).
@@ -591,11 +604,39 @@ fn compile_inner(
             body,
         });
     }
+    let mut sections = Vec::with_capacity(desc.extensions.len());
+    for (key, raw) in &desc.extensions {
+        let handler = registry.sections.get(key).ok_or_else(|| {
+            SceneError::semantic(
+                format!("extensions[\"{key}\"]"),
+                "(section)",
+                format!(
+                    "a registered scene section: [{}]; a section from a compiled plugin needs `--plugin PATH`",
+                    registry.sections.keys().cloned().collect::<Vec<_>>().join(", ")
+                ),
+            )
+        })?;
+        let ctx = crate::registry::SectionCompileContext {
+            key,
+            ron: raw.get_ron(),
+            settings: &settings,
+            objects: &objects,
+            frames: &frames,
+            source,
+        };
+        let compiled = handler.compile(&ctx)?;
+        sections.push(CompiledSceneSection {
+            key: key.clone(),
+            handler: handler.clone(),
+            compiled,
+        });
+    }
     Ok(SceneModel {
         settings,
         objects,
         frames,
         episode_steps: desc.episode_steps,
+        sections,
         extensions: desc.extensions.clone(),
         description: desc.description.clone(),
         source: source.clone(),
@@ -650,6 +691,9 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
             }
             BodyModel::Plugin { kind, compiled } => kind.spawn(app, entity, compiled)?,
         }
+    }
+    for section in &model.sections {
+        section.handler.spawn(app, &section.compiled)?;
     }
     if let Some(mut rigid) = app.world.get_resource_mut::<crate::rigid::RigidContext>() {
         rigid.refresh_queries();

@@ -13,20 +13,26 @@
 //! - [`ik`]: [`solve_ik`], [`forward_kinematics`].
 //! - [`models`]: [`RobotSpec`] of `franka` and `spot` (files, joint groups, home poses).
 //!
-//! Not registered with the engine yet: no plugin, no scene section, no actions.
+//! - [`actions`]: action modes (base, arm, gripper, 14 discrete keys).
+//! - [`plugin`]: [`RobotsPlugin`]: the `robots` scene section, per-env controllers ([`Robots`]),
+//!   action processing, joint states for observations and `--dump-state`.
 
 #![deny(missing_docs)]
 
+pub mod actions;
 pub mod control;
 pub mod error;
 pub mod ik;
 pub mod models;
+pub mod plugin;
 pub mod robot;
 pub mod urdf;
 
+pub use actions::{ActionConfig, ActionModes, ArmMode, BaseMode, DiscreteKey, GripperMode};
 pub use control::{BaseVelocity, HolonomicBase, JointCommand, JointController, JointGains};
 pub use error::RobotError;
 pub use ik::{forward_kinematics, solve_ik, IkOptions, IkSolution};
 pub use models::{RobotKind, RobotSpec};
+pub use plugin::{RobotObservation, RobotRuntime, Robots, RobotsPlugin};
 pub use robot::{spawn_robot, Robot, RobotBody, RobotFrame, RobotJoint, RootMount, SpawnOptions};
 pub use urdf::{read_urdf, AssetPaths, UrdfModel};

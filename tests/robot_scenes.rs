@@ -1,0 +1,261 @@
+//! Robots in scene files: the `robots` section, action modes, discrete keys, scripts, resets.
+
+mod common;
+
+use modesuite::engine::scene::SceneSource;
+use modesuite::engine::{Env, RigidContext, Space};
+use modesuite::robots::{DiscreteKey, Robots};
+use nalgebra::Vector3;
+
+fn franka_scene(actions: &str) -> String {
+    format!(
+        r#"Scene(
+    physics: (dt: 0.016666666666666666, substeps: 4),
+    objects: [(name: "ground", shape: Plane(size: (20.0, 20.0)), body: Static)],
+    extensions: {{ "robots": [(name: "robot", model: "franka", actions: {actions})] }},
+)"#
+    )
+}
+
+fn env(text: &str) -> Env {
+    let mut env = Env::new(common::app_from_ron(text));
+    env.reset(Some(1));
+    env
+}
+
+fn ee_and_base(env: &Env) -> (Vector3<f64>, Vector3<f64>, bool) {
+    let robots = env.app.world.resource::<Robots>();
+    let ctx = env.app.world.resource::<RigidContext>();
+    let o = robots.robots[0].observe(ctx).unwrap();
+    (
+        o.ee.translation.vector,
+        o.base.translation.vector,
+        o.gripper_closed,
+    )
+}
+
+fn compile_err(text: &str) -> String {
+    let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
+    let app = modesuite::cli::default_app();
+    match app.compile_scene(&desc, &SceneSource::in_memory(".")) {
+        Ok(_) => panic!("scene compiled"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn action_spaces_follow_the_modes() {
+    let cases = [
+        ("()", vec![3, 7, 1]),
+        ("(arm: EePoseDelta)", vec![3, 6, 1]),
+        ("(arm: JointPosition, base: Off)", vec![7, 1]),
+        ("(arm: EePoseAbsolute, gripper: Off)", vec![3, 6]),
+    ];
+    for (actions, dims) in cases {
+        let e = env(&franka_scene(actions));
+        let space = e.spaces().action;
+        let got: Vec<usize> = match &space {
+            Space::Dict(items) => items.iter().map(|(_, s)| s.flat_dim()).collect(),
+            other => vec![other.flat_dim()],
+        };
+        println!("franka actions {actions}: dims {got:?} (expected {dims:?})");
+        assert_eq!(got, dims);
+    }
+    let e = env(&franka_scene("(discrete: true)"));
+    assert_eq!(e.spaces().action, Space::Discrete { n: 14 });
+}
+
+#[test]
+fn base_velocity_and_gripper_actions_move_the_franka() {
+    let mut e = env(&franka_scene("()"));
+    let (_, b0, _) = ee_and_base(&e);
+    // vx = 0.5 of 0.5 m/s for 2 s, gripper closed.
+    let mut a = vec![0.0f32; 11];
+    a[0] = 0.5;
+    a[10] = 1.0;
+    for _ in 0..120 {
+        let out = e.step(&a);
+        assert!(out.info.error.is_none(), "{:?}", out.info.error);
+    }
+    let (_, b1, closed) = ee_and_base(&e);
+    let dx = b1.x - b0.x;
+    println!("base moved {dx:.4} m in 2 s at 0.25 m/s (expected 0.5 - ramp, tol [0.45, 0.51])");
+    assert!((0.45..=0.51).contains(&dx), "dx {dx}");
+    assert!(closed);
+    let q = e
+        .app
+        .world
+        .resource::<Robots>()
+        .robots
+        .first()
+        .map(|r| {
+            let ctx = e.app.world.resource::<RigidContext>();
+            r.fixed.robot.joint_positions(ctx).unwrap()[r.fixed.gripper]
+        })
+        .unwrap();
+    println!("finger joint after closing: {q:.4} m (tol < 0.005)");
+    assert!(q < 0.005);
+}
+
+#[test]
+fn ee_pose_delta_moves_the_hand_in_the_base_frame() {
+    let mut e = env(&franka_scene("(arm: EePoseDelta)"));
+    let (p0, _, _) = ee_and_base(&e);
+    // Hand up at 0.25 m/s for 1 s.
+    let mut a = vec![0.0f32; 10];
+    a[5] = 1.0;
+    for _ in 0..60 {
+        e.step(&a);
+    }
+    // Let it settle with zero command.
+    let zero = vec![0.0f32; 10];
+    for _ in 0..30 {
+        e.step(&zero);
+    }
+    let (p1, _, _) = ee_and_base(&e);
+    let d = p1 - p0;
+    println!(
+        "hand moved ({:.4}, {:.4}, {:.4}) m for 0.25 m up (tol 0.01 along z, 0.01 across)",
+        d.x, d.y, d.z
+    );
+    assert!((d.z - 0.25).abs() <= 0.01);
+    assert!(d.x.abs() <= 0.01 && d.y.abs() <= 0.01);
+}
+
+#[test]
+fn discrete_keys_drive_base_and_hand() {
+    let mut e = env(&franka_scene("(discrete: true)"));
+    let (p0, b0, _) = ee_and_base(&e);
+    let key = |k: DiscreteKey| vec![DiscreteKey::ALL.iter().position(|x| *x == k).unwrap() as f32];
+    for _ in 0..60 {
+        e.step(&key(DiscreteKey::BodyForward));
+    }
+    let (_, b1, _) = ee_and_base(&e);
+    for _ in 0..40 {
+        e.step(&key(DiscreteKey::HandDown));
+    }
+    for _ in 0..10 {
+        e.step(&key(DiscreteKey::Grasp));
+    }
+    for _ in 0..30 {
+        e.step(&key(DiscreteKey::Release));
+    }
+    let (p2, b2, closed) = ee_and_base(&e);
+    let drive = b1.x - b0.x;
+    let hand_dz = (p2.z - p0.z) - (b2.z - b0.z);
+    println!(
+        "1 s of body_forward: {drive:.4} m (tol [0.4, 0.51]); 40 steps of hand_down: {hand_dz:.4} m (expected -0.167, tol 0.02)"
+    );
+    assert!((0.4..=0.51).contains(&drive));
+    assert!((hand_dz + 40.0 / 60.0 * 0.25).abs() <= 0.02);
+    assert!(!closed, "release opens the gripper");
+    assert_eq!(DiscreteKey::ALL.len(), 14);
+}
+
+#[test]
+fn reset_restores_the_robot_and_runs_are_deterministic() {
+    let run = || {
+        let mut e = env(&franka_scene("(arm: EePoseDelta)"));
+        let mut a = vec![0.0f32; 10];
+        for i in 0..90 {
+            a[0] = ((i as f32) * 0.1).sin();
+            a[3] = 0.5;
+            a[9] = if i > 45 { 1.0 } else { -1.0 };
+            e.step(&a);
+        }
+        e
+    };
+    let mut e1 = run();
+    let e2 = run();
+    println!("state hashes {:x} {:x}", e1.state_hash(), e2.state_hash());
+    assert_eq!(e1.state_hash(), e2.state_hash());
+    let fresh = env(&franka_scene("(arm: EePoseDelta)"));
+    e1.reset(Some(1));
+    assert_eq!(e1.state_hash(), fresh.state_hash());
+}
+
+#[test]
+fn franka_square_scene_follows_its_script() {
+    let path = common::root().join("scenes/examples/franka_square.scene.ron");
+    let (desc, source) = modesuite::engine::scene::load_file(&path).unwrap();
+    let mut app = modesuite::cli::default_app();
+    let model = app.compile_scene(&desc, &source).unwrap();
+    app.spawn_scene(model).unwrap();
+    let mut e = Env::new(app);
+    e.reset(Some(0));
+    let mut corners = Vec::new();
+    let mut worst_ee: f64 = 0.0;
+    for step in 1..=960 {
+        let out = e.step(&[]);
+        assert!(out.info.error.is_none(), "{:?}", out.info.error);
+        if step % 240 == 0 {
+            corners.push(ee_and_base(&e).1);
+        }
+        if step % 60 == 30 {
+            // Mid-segment: the hand is within 2 cm of its target (base frame).
+            let robots = e.app.world.resource::<Robots>();
+            let ctx = e.app.world.resource::<RigidContext>();
+            let r = &robots.robots[0];
+            let o = r.observe(ctx).unwrap();
+            let target = o.base * r.ee_target;
+            let err = (o.ee.translation.vector - target.translation.vector).norm();
+            if err > 0.02 {
+                println!("t {:.2}: hand error {err:.4} m", step as f64 / 60.0);
+            }
+            worst_ee = worst_ee.max(err);
+        }
+    }
+    let expect = [[1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]];
+    for (c, x) in corners.iter().zip(expect) {
+        println!(
+            "corner ({:.3}, {:.3}) expected ({}, {}) (tol 0.05 m)",
+            c.x, c.y, x[0], x[1]
+        );
+        assert!((c.x - x[0]).abs() <= 0.05 && (c.y - x[1]).abs() <= 0.05);
+    }
+    println!("worst hand tracking error {worst_ee:.4} m (tol 0.02)");
+    assert!(worst_ee <= 0.02);
+}
+
+#[test]
+fn robot_section_errors_name_the_field() {
+    let e =
+        compile_err(r#"Scene(objects: [], extensions: { "robots": [(name: "r", model: "ur5")] })"#);
+    println!("{e}");
+    assert!(e.contains("model") && e.contains("ur5") && e.contains("franka"));
+    let e = compile_err(
+        r#"Scene(objects: [], extensions: { "robots": [(name: "r", model: "franka", actions: (base: LegJoints))] })"#,
+    );
+    println!("{e}");
+    assert!(e.contains("actions.base") && e.contains("Velocity"));
+    let e = compile_err(r#"Scene(objects: [], extensions: { "robtos": [] })"#);
+    println!("{e}");
+    assert!(e.contains("robtos") && e.contains("robots") && e.contains("--plugin"));
+    let e = compile_err(
+        r#"Scene(objects: [], extensions: { "robots": [(name: "r", model: "franka", colour: 1)] })"#,
+    );
+    println!("{e}");
+    assert!(e.contains("colour"));
+}
+
+#[test]
+fn spot_leg_joint_mode_stands_with_zero_action() {
+    let text = r#"Scene(
+    physics: (dt: 0.016666666666666666, substeps: 4),
+    objects: [(name: "ground", shape: Plane(size: (20.0, 20.0)), body: Static)],
+    extensions: { "robots": [(name: "spot", model: "spot", actions: (base: LegJoints))] },
+)"#;
+    let mut e = env(text);
+    let n = e.spaces().action.flat_dim();
+    assert_eq!(n, 12 + 6 + 1);
+    for _ in 0..180 {
+        let out = e.step(&vec![0.0; n]);
+        assert!(out.info.error.is_none(), "{:?}", out.info.error);
+    }
+    let (_, b, _) = ee_and_base(&e);
+    println!(
+        "spot body height after 3 s: {:.4} m (tol 0.55 +- 0.03)",
+        b.z
+    );
+    assert!((b.z - 0.55).abs() <= 0.03);
+}
