@@ -167,3 +167,60 @@ pub fn pbd_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     }
     Ok(out)
 }
+
+/// Robot cases: each robot alone on flat ground at dt 1/60 s (4 substeps) with its controller
+/// on, through the full env path. `franka`: base velocity (0.25 m/s forward) and joint-delta arm
+/// mode with a constant arm command; `spot`: walking forward at 0.5 m/s (`Locomotion`). Extra
+/// keys: `robot`, `mode`, `distance_m` (base travel during the run, to show it moved).
+pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
+    let mut out = Vec::new();
+    for (case, actions, mode) in [
+        ("franka", "(base: Velocity, arm: JointDelta)", "velocity+joint_delta"),
+        ("spot", "(base: Locomotion, arm: JointDelta)", "locomotion+joint_delta"),
+    ] {
+        let text = format!(
+            r#"Scene(
+    physics: (dt: 0.016666666666666666, substeps: 4),
+    objects: [(name: "ground", shape: Plane(size: (200.0, 200.0)), body: Static)],
+    extensions: {{ "robots": [(name: "robot", model: "{case}", actions: {actions})] }},
+)"#
+        );
+        let mut env = crate::cli::env_from_text(&text).map_err(|e| format!("{case}: {e}"))?;
+        env.reset(Some(0));
+        let n = env.spaces().action.flat_dim();
+        // Forward at half the base limit (franka 0.25 m/s) or the full walking command (spot
+        // 0.5 m/s); the arm's first joint drifts slowly.
+        let mut a = vec![0.0f32; n];
+        a[0] = if case == "spot" { 1.0 } else { 0.5 };
+        if n > 3 {
+            a[3] = 0.05;
+        }
+        let start = env.app.world.resource::<modesuite_robots::Robots>().robots[0]
+            .observe(env.app.world.resource::<modesuite_engine::RigidContext>())
+            .map_err(|e| e.to_string())?
+            .base
+            .translation
+            .vector;
+        let steps = steps(600.0, opts);
+        let t = Instant::now();
+        for _ in 0..steps {
+            let o = env.step(&a);
+            if let Some(e) = o.info.error {
+                return Err(format!("{case}: {e}"));
+            }
+        }
+        let sps = steps as f64 / t.elapsed().as_secs_f64();
+        let end = env.app.world.resource::<modesuite_robots::Robots>().robots[0]
+            .observe(env.app.world.resource::<modesuite_engine::RigidContext>())
+            .map_err(|e| e.to_string())?
+            .base
+            .translation
+            .vector;
+        let mut extra = BTreeMap::new();
+        extra.insert("robot".into(), json!(case));
+        extra.insert("mode".into(), json!(mode));
+        extra.insert("distance_m".into(), json!((end - start).xy().norm()));
+        out.push(BenchRecord::new(case, sps, 1, 1, extra));
+    }
+    Ok(out)
+}

@@ -128,6 +128,16 @@ pub fn default_app() -> SimApp {
     app
 }
 
+/// An env of a scene given as RON text (in-memory source, paths relative to the working
+/// directory), with every default plugin.
+pub fn env_from_text(text: &str) -> Result<Env, SceneError> {
+    let desc = modesuite_engine::scene::parse_str(text, "<memory>")?;
+    let mut app = default_app();
+    let model = app.compile_scene(&desc, &SceneSource::in_memory("."))?;
+    app.spawn_scene(model)?;
+    Ok(Env::new(app))
+}
+
 /// Runs the CLI; returns the process exit code's error on failure.
 pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
     match cli.command {
@@ -539,14 +549,15 @@ fn bench(
         "engine" => modesuite_engine::bench::engine_cases(&opts).map_err(CliError::runtime)?,
         "fem" => crate::benches::fem_cases(&opts).map_err(CliError::runtime)?,
         "pbd" => crate::benches::pbd_cases(&opts).map_err(CliError::runtime)?,
-        "robots" | "render" | "tasks" => {
+        "robots" => crate::benches::robots_cases(&opts).map_err(CliError::runtime)?,
+        "render" | "tasks" => {
             return Err(CliError::input(format!(
-                "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine, fem, pbd"
+                "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine, fem, pbd, robots"
             )))
         }
         other => {
             return Err(CliError::input(format!(
-                "bench {other}: unknown suite; available: engine, fem, pbd"
+                "bench {other}: unknown suite; available: engine, fem, pbd, robots"
             )))
         }
     };
