@@ -20,6 +20,7 @@
 pub mod control;
 pub mod error;
 pub mod ik;
+pub mod locomotion;
 pub mod models;
 pub mod robot;
 pub mod urdf;
@@ -27,6 +28,7 @@ pub mod urdf;
 pub use control::{BaseVelocity, HolonomicBase, JointCommand, JointController, JointGains};
 pub use error::RobotError;
 pub use ik::{forward_kinematics, solve_ik, IkOptions, IkSolution};
+pub use locomotion::{FootState, LegKinematics, LegTargets, TrotController, TrotParams};
 pub use models::{RobotKind, RobotSpec};
 pub use robot::{spawn_robot, Robot, RobotBody, RobotFrame, RobotJoint, RootMount, SpawnOptions};
 pub use urdf::{read_urdf, AssetPaths, UrdfModel};
