@@ -134,11 +134,7 @@ impl LegKinematics {
                 "the leg joints must form a chain hip roll -> hip pitch -> knee",
             ));
         }
-        for (j, want) in [
-            (hx, Vector3::x()),
-            (hy, Vector3::y()),
-            (kn, Vector3::y()),
-        ] {
+        for (j, want) in [(hx, Vector3::x()), (hy, Vector3::y()), (kn, Vector3::y())] {
             if !is_axis(&j.axis, want) {
                 return Err(bad(j, &format!("axis must be {want:?}, got {:?}", j.axis)));
             }
@@ -180,7 +176,12 @@ impl LegKinematics {
         let (sx, sz) = rot_y(q[1], ax + self.knee.x, az + self.knee.y);
         let inner = self.hy_origin + Vector3::new(sx, 0.0, sz);
         let (s, c) = q[0].sin_cos();
-        self.hip + Vector3::new(inner.x, inner.y * c - inner.z * s, inner.y * s + inner.z * c)
+        self.hip
+            + Vector3::new(
+                inner.x,
+                inner.y * c - inner.z * s,
+                inner.y * s + inner.z * c,
+            )
     }
 
     /// Joint positions (hx, hy, kn) that put the foot sphere centre at `p` (base frame), knee
@@ -215,7 +216,11 @@ impl LegKinematics {
         let violation = |q: f64| (self.lower[2] - q).max(q - self.upper[2]).max(0.0);
         let a = c.acos();
         let (k1, k2) = (wrap(-a - gamma), wrap(a - gamma));
-        let kn = if violation(k2) < violation(k1) { k2 } else { k1 };
+        let kn = if violation(k2) < violation(k1) {
+            k2
+        } else {
+            k1
+        };
         // Leg vector with that knee, before the hip pitch rotation.
         let (ax, az) = rot_y(kn, self.foot.x, self.foot.y);
         let (ax, az) = (ax + self.knee.x, az + self.knee.y);
@@ -625,9 +630,7 @@ impl TrotController {
                     cs * nominal.x - sn * nominal.y,
                     sn * nominal.x + cs * nominal.y,
                 );
-                let mut td = n
-                    + v * t_pred
-                    + p.raibert_gain * (v_meas.xy() - v_cmd);
+                let mut td = n + v * t_pred + p.raibert_gain * (v_meas.xy() - v_cmd);
                 let off = td - nominal.xy();
                 if off.norm() > p.max_foot_offset {
                     td = nominal.xy() + off * (p.max_foot_offset / off.norm());
@@ -657,8 +660,7 @@ impl TrotController {
             if !swing {
                 let hip_h = r_rp * kin.hip;
                 let hip_rate = w_meas.cross(&hip_h).z;
-                aim.z += p.attitude_gain * (hip_h.z - kin.hip.z)
-                    + p.attitude_damping * hip_rate
+                aim.z += p.attitude_gain * (hip_h.z - kin.hip.z) + p.attitude_damping * hip_rate
                     - self.height_integral;
             }
             // Into the base frame and through the inverse kinematics.
