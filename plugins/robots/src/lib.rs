@@ -23,6 +23,7 @@ pub mod actions;
 pub mod control;
 pub mod error;
 pub mod ik;
+pub mod locomotion;
 pub mod models;
 pub mod plugin;
 pub mod robot;
@@ -32,6 +33,7 @@ pub use actions::{ActionConfig, ActionModes, ArmMode, BaseMode, DiscreteKey, Gri
 pub use control::{BaseVelocity, HolonomicBase, JointCommand, JointController, JointGains};
 pub use error::RobotError;
 pub use ik::{forward_kinematics, solve_ik, IkOptions, IkSolution};
+pub use locomotion::{FootState, LegKinematics, LegTargets, TrotController, TrotParams};
 pub use models::{RobotKind, RobotSpec};
 pub use plugin::{RobotObservation, RobotRuntime, Robots, RobotsPlugin};
 pub use robot::{spawn_robot, Robot, RobotBody, RobotFrame, RobotJoint, RootMount, SpawnOptions};
