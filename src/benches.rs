@@ -175,8 +175,16 @@ pub fn pbd_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
 pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
     for (case, actions, mode) in [
-        ("franka", "(base: Velocity, arm: JointDelta)", "velocity+joint_delta"),
-        ("spot", "(base: Locomotion, arm: JointDelta)", "locomotion+joint_delta"),
+        (
+            "franka",
+            "(base: Velocity, arm: JointDelta)",
+            "velocity+joint_delta",
+        ),
+        (
+            "spot",
+            "(base: Locomotion, arm: JointDelta)",
+            "locomotion+joint_delta",
+        ),
     ] {
         let text = format!(
             r#"Scene(

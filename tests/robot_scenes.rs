@@ -259,3 +259,57 @@ fn spot_leg_joint_mode_stands_with_zero_action() {
     );
     assert!((b.z - 0.55).abs() <= 0.03);
 }
+
+#[test]
+fn spot_walks_through_the_locomotion_action() {
+    let text = r#"Scene(
+    physics: (dt: 0.016666666666666666, substeps: 4),
+    objects: [(name: "ground", shape: Plane(size: (40.0, 40.0)), body: Static)],
+    extensions: { "robots": [(name: "spot", model: "spot")] },
+)"#;
+    let mut e = env(text);
+    let n = e.spaces().action.flat_dim();
+    assert_eq!(n, 3 + 6 + 1);
+    let mut a = vec![0.0f32; n];
+    a[0] = 1.0; // 0.5 m/s forward
+    let mut x = Vec::new();
+    for step in 0..360 {
+        let out = e.step(&a);
+        assert!(out.info.error.is_none(), "{:?}", out.info.error);
+        x.push((step, ee_and_base(&e).1));
+    }
+    // Mean speed over the last 3 s (after a 3 s start).
+    let v = (x[359].1.x - x[179].1.x) / 3.0;
+    let z = x.iter().map(|(_, b)| b.z).fold(f64::INFINITY, f64::min);
+    println!("spot walking through the env: {v:.3} m/s for 0.5 (tol 20 %), lowest body {z:.3} m");
+    assert!((v - 0.5).abs() <= 0.1);
+    assert!(z > 0.35);
+}
+
+#[test]
+fn spot_figure_eight_scene_walks_both_loops() {
+    let path = common::root().join("scenes/examples/spot_figure_eight.scene.ron");
+    let (desc, source) = modesuite::engine::scene::load_file(&path).unwrap();
+    let mut app = modesuite::cli::default_app();
+    let model = app.compile_scene(&desc, &source).unwrap();
+    app.spawn_scene(model).unwrap();
+    let mut e = Env::new(app);
+    e.reset(Some(0));
+    let (mut ymin, mut ymax, mut zmin) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY);
+    let mut last = Vector3::zeros();
+    for _ in 0..1885 {
+        let out = e.step(&[]);
+        assert!(out.info.error.is_none(), "{:?}", out.info.error);
+        last = ee_and_base(&e).1;
+        ymin = ymin.min(last.y);
+        ymax = ymax.max(last.y);
+        zmin = zmin.min(last.z);
+    }
+    println!(
+        "figure eight: y in [{ymin:.3}, {ymax:.3}] (expected about [-2, 2], tol each end 0.6), end ({:.3}, {:.3}) (start (0, 0), tol 0.75 m), lowest body {zmin:.3} m (> 0.35)",
+        last.x, last.y
+    );
+    assert!(ymax > 1.4 && ymax < 2.6 && ymin < -1.4 && ymin > -2.6);
+    assert!(last.xy().norm() < 0.75);
+    assert!(zmin > 0.35);
+}

@@ -45,6 +45,7 @@ use crate::actions::{ActionConfig, ActionModes, ArmMode, BaseMode, DiscreteKey, 
 use crate::control::{BaseVelocity, HolonomicBase, JointCommand, JointController};
 use crate::error::RobotError;
 use crate::ik::{solve_ik, IkOptions};
+use crate::locomotion::{TrotController, TrotParams};
 use crate::models::{RobotKind, RobotSpec};
 use crate::robot::Robot;
 use crate::urdf::{AssetPaths, UrdfModel};
@@ -81,6 +82,10 @@ impl Plugin for RobotsPlugin {
         app.add_systems(
             modesuite_engine::EnvStep,
             robot_actions.in_set(EnvSystems::ProcessActions),
+        );
+        app.add_systems(
+            modesuite_engine::PhysicsStep,
+            robot_gait.in_set(PhysicsSystems::ApplyActions),
         );
         app.add_systems(Substep, robot_control.in_set(SubstepSystems::Predict));
         app.add_systems(
@@ -364,13 +369,6 @@ fn resolve_modes(
             valid,
         ));
     }
-    if base == BaseMode::Locomotion {
-        return Err(SceneError::semantic(
-            format!("{path}.actions.base"),
-            "Locomotion",
-            "not implemented yet: the walking controller is missing; use LegJoints or Off",
-        ));
-    }
     for (field, v) in [
         ("joint_delta_scale", c.joint_delta_scale),
         ("ee_speed", c.ee_speed),
@@ -494,7 +492,18 @@ fn build_runtime(
     }
     let ee_start = robot.body_pose(ctx, base_body)?.inverse() * robot.frame_pose(ctx, ee_frame)?;
     let gripper_body = robot.frames[ee_frame].body;
+    let gait = if c.modes.base == BaseMode::Locomotion {
+        Some(TrotController::new(
+            &robot,
+            &c.model,
+            &c.spec,
+            TrotParams::default(),
+        )?)
+    } else {
+        None
+    };
     Ok(RobotRuntime {
+        gait,
         fixed: Arc::new(RobotFixed {
             name: c.desc.name.clone(),
             kind: c.spec.kind,
@@ -570,6 +579,8 @@ pub struct RobotRuntime {
     pub ee_target: Isometry3<f64>,
     /// Gripper closed.
     pub gripper_closed: bool,
+    /// Walking controller (legged base in `Locomotion` mode).
+    pub gait: Option<TrotController>,
 }
 
 /// Every robot of an env, part of the env state.
@@ -587,33 +598,16 @@ impl Robots {
 }
 
 #[derive(Clone)]
-struct RobotsState(Vec<(JointController, BaseVelocity, Isometry3<f64>, bool)>);
+struct RobotsState(Vec<RobotRuntime>);
 
 impl Stateful for Robots {
     fn save_state(&self) -> Box<dyn std::any::Any + Send + Sync> {
-        Box::new(RobotsState(
-            self.robots
-                .iter()
-                .map(|r| {
-                    (
-                        r.controller.clone(),
-                        r.base_command,
-                        r.ee_target,
-                        r.gripper_closed,
-                    )
-                })
-                .collect(),
-        ))
+        Box::new(RobotsState(self.robots.clone()))
     }
 
     fn load_state(&mut self, state: &(dyn std::any::Any + Send + Sync)) {
         if let Some(s) = state.downcast_ref::<RobotsState>() {
-            for (r, (c, b, e, g)) in self.robots.iter_mut().zip(&s.0) {
-                r.controller = c.clone();
-                r.base_command = *b;
-                r.ee_target = *e;
-                r.gripper_closed = *g;
-            }
+            self.robots.clone_from(&s.0);
         }
     }
 
@@ -641,6 +635,15 @@ impl Stateful for Robots {
                 h.write_f64(x);
             }
             h.write_u64(u64::from(r.gripper_closed));
+            if let Some(g) = &r.gait {
+                h.write_f64(g.phase());
+                for f in g.feet() {
+                    for x in f.target.iter().chain(f.liftoff.iter()) {
+                        h.write_f64(*x);
+                    }
+                    h.write_u64(u64::from(f.swing));
+                }
+            }
         }
     }
 }
@@ -922,6 +925,32 @@ fn robot_control(
             r.controller.apply(&f.robot, &mut ctx)
         })();
         if let Err(e) = result {
+            errors.raise(format!("robot \"{}\": {e}", f.name));
+        }
+    }
+}
+
+/// The walking controllers, once per physics step (they plan at the control rate and write leg
+/// joint targets; the joint controllers track them every substep).
+fn robot_gait(
+    mut robots: ResMut<Robots>,
+    ctx: Option<Res<RigidContext>>,
+    settings: Res<SimSettings>,
+    mut errors: ResMut<SimErrors>,
+) {
+    let Some(ctx) = ctx else { return };
+    for r in robots.robots.iter_mut() {
+        let Some(gait) = r.gait.as_mut() else {
+            continue;
+        };
+        let f = &r.fixed;
+        if let Err(e) = gait.step(
+            &f.robot,
+            &ctx,
+            r.base_command,
+            settings.dt,
+            &mut r.controller,
+        ) {
             errors.raise(format!("robot \"{}\": {e}", f.name));
         }
     }
