@@ -188,7 +188,7 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     ] {
         let text = format!(
             r#"Scene(
-    physics: (dt: 0.016666666666666666, substeps: 4),
+    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1),
     objects: [(name: "ground", shape: Plane(size: (200.0, 200.0)), body: Static)],
     extensions: {{ "robots": [(name: "robot", model: "{case}", actions: {actions})] }},
 )"#

@@ -10,7 +10,7 @@ use nalgebra::Vector3;
 fn franka_scene(actions: &str) -> String {
     format!(
         r#"Scene(
-    physics: (dt: 0.016666666666666666, substeps: 4),
+    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1),
     objects: [(name: "ground", shape: Plane(size: (20.0, 20.0)), body: Static)],
     extensions: {{ "robots": [(name: "robot", model: "franka", actions: {actions})] }},
 )"#
@@ -241,7 +241,7 @@ fn robot_section_errors_name_the_field() {
 #[test]
 fn spot_leg_joint_mode_stands_with_zero_action() {
     let text = r#"Scene(
-    physics: (dt: 0.016666666666666666, substeps: 4),
+    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1),
     objects: [(name: "ground", shape: Plane(size: (20.0, 20.0)), body: Static)],
     extensions: { "robots": [(name: "spot", model: "spot", actions: (base: LegJoints))] },
 )"#;
@@ -263,7 +263,7 @@ fn spot_leg_joint_mode_stands_with_zero_action() {
 #[test]
 fn spot_walks_through_the_locomotion_action() {
     let text = r#"Scene(
-    physics: (dt: 0.016666666666666666, substeps: 4),
+    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1),
     objects: [(name: "ground", shape: Plane(size: (40.0, 40.0)), body: Static)],
     extensions: { "robots": [(name: "spot", model: "spot")] },
 )"#;
@@ -312,4 +312,30 @@ fn spot_figure_eight_scene_walks_both_loops() {
     assert!(ymax > 1.4 && ymax < 2.6 && ymin < -1.4 && ymin > -2.6);
     assert!(last.xy().norm() < 0.75);
     assert!(zmin > 0.35);
+}
+
+#[test]
+fn arm_joint_targets_respect_velocity_limits() {
+    let mut e = env(&franka_scene("(arm: JointPosition, base: Off, gripper: Off)"));
+    // Joint 1 asked to jump across its whole range (5.8 rad).
+    let mut a = vec![0.0f32; 7];
+    a[0] = 1.0;
+    let (limit, j) = {
+        let r = &e.app.world.resource::<Robots>().robots[0];
+        (r.fixed.robot.joints[r.fixed.arm[0]].velocity, r.fixed.arm[0])
+    };
+    let mut peak: f64 = 0.0;
+    for _ in 0..60 {
+        e.step(&a);
+        let r = &e.app.world.resource::<Robots>().robots[0];
+        let qd = r
+            .fixed
+            .robot
+            .joint_velocities(e.app.world.resource::<RigidContext>())
+            .unwrap()[j];
+        peak = peak.max(qd.abs());
+    }
+    println!("joint 1 peak speed {peak:.3} rad/s for a limit of {limit} rad/s (tol +10 %)");
+    assert!(peak <= limit * 1.1);
+    assert!(peak >= limit * 0.8, "it should move at about the limit");
 }

@@ -110,6 +110,8 @@ pub struct SimSettings {
     pub decimation: u32,
     /// Gravity in the world frame, m/s^2 (z up).
     pub gravity: nalgebra::Vector3<f64>,
+    /// Internal solver substeps of each rapier step.
+    pub rigid_iterations: u32,
 }
 
 impl Default for SimSettings {
@@ -119,6 +121,7 @@ impl Default for SimSettings {
             substeps: 1,
             decimation: 1,
             gravity: nalgebra::Vector3::new(0.0, 0.0, -9.81),
+            rigid_iterations: 4,
         }
     }
 }

@@ -74,6 +74,15 @@ pub struct PhysicsDesc {
     /// Gravity, m/s^2, world frame (default (0, 0, -9.81)).
     #[serde(default = "default_gravity")]
     pub gravity: [f64; 3],
+    /// Internal solver substeps of each rapier step (rapier's `num_solver_iterations`, default
+    /// 4). Multibodies (robots) rebuild their mass matrix in each, so robot scenes that already
+    /// take `substeps` use 1.
+    #[serde(default = "four")]
+    pub rigid_iterations: u32,
+}
+
+fn four() -> u32 {
+    4
 }
 
 impl Default for PhysicsDesc {
@@ -83,6 +92,7 @@ impl Default for PhysicsDesc {
             substeps: 1,
             decimation: 1,
             gravity: default_gravity(),
+            rigid_iterations: 4,
         }
     }
 }

@@ -282,6 +282,13 @@ fn validate_physics(p: &PhysicsDesc) -> Result<(), SceneError> {
             "an integer in 1..=1000",
         ));
     }
+    if !(1..=100).contains(&p.rigid_iterations) {
+        return Err(SceneError::semantic(
+            "physics.rigid_iterations",
+            p.rigid_iterations.to_string(),
+            "an integer in 1..=100",
+        ));
+    }
     if !finite3(&p.gravity) {
         return Err(SceneError::semantic(
             "physics.gravity",
@@ -454,6 +461,7 @@ fn compile_inner(
         substeps: desc.physics.substeps,
         decimation: desc.physics.decimation,
         gravity: desc::gravity_of(&desc.physics),
+        rigid_iterations: desc.physics.rigid_iterations,
     };
     if let Some(0) = desc.episode_steps {
         return Err(SceneError::semantic(
@@ -661,6 +669,7 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
     }
     if let Some(mut rigid) = app.world.get_resource_mut::<crate::rigid::RigidContext>() {
         rigid.set_gravity(model.settings.gravity);
+        rigid.params.num_solver_iterations = model.settings.rigid_iterations as usize;
     }
     for (i, obj) in model.objects.iter().enumerate() {
         let entity = app

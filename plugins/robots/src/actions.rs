@@ -9,7 +9,8 @@
 //!   (linear and angular velocity of the end-effector target in the base frame, in [-1, 1], scaled
 //!   by `ee_speed` and `ee_angular_speed`); `EePoseAbsolute` [6] (target position in the base
 //!   frame, m, and rotation vector, rad); `Off` [0]. End-effector targets are solved by IK over
-//!   the arm joints.
+//!   the arm joints. Whatever the mode, an arm joint's target moves at most at the joint's
+//!   URDF velocity limit, so the PD motors never track a reference faster than the limit.
 //! - gripper: `Binary` [1] (a > 0 closes); `Off` [0].
 //!
 //! With `discrete: true` the robot's whole action is one `Discrete(14)` value, the 14 keys of

@@ -752,6 +752,26 @@ fn parse_action(f: &RobotFixed, a: &[f32]) -> Command {
     cmd
 }
 
+/// Sets a position target of an arm joint, moved from the previous target by at most the
+/// joint's velocity limit times `dt`: the reference the PD motor tracks never runs faster than
+/// the URDF's velocity limit, whatever the action mode asks (IK jumps, absolute targets).
+fn set_rate_limited(
+    r: &mut RobotRuntime,
+    robot: &Robot,
+    ctx: &RigidContext,
+    j: usize,
+    q: f64,
+    dt: f64,
+) -> Result<(), RobotError> {
+    let prev = match r.controller.commands[j] {
+        JointCommand::Position(p) => p,
+        _ => robot.joint_positions(ctx)?[j],
+    };
+    let step = robot.joints[j].velocity * dt;
+    r.controller
+        .set_position(robot, j, prev + (q - prev).clamp(-step, step))
+}
+
 /// Applies one control step's command to a robot's targets.
 fn apply_command(
     r: &mut RobotRuntime,
@@ -780,8 +800,7 @@ fn apply_command(
                 JointCommand::Position(q) => q,
                 _ => robot.joint_positions(ctx)?[j],
             };
-            r.controller
-                .set_position(robot, j, q + m.joint_delta_scale * dt * a)?;
+            set_rate_limited(r, robot, ctx, j, q + m.joint_delta_scale * dt * a, dt)?;
         }
     }
     if let Some(p) = cmd.arm_position {
@@ -792,8 +811,7 @@ fn apply_command(
             } else {
                 (-std::f64::consts::PI, std::f64::consts::PI)
             };
-            r.controller
-                .set_position(robot, j, lo + 0.5 * (a + 1.0) * (hi - lo))?;
+            set_rate_limited(r, robot, ctx, j, lo + 0.5 * (a + 1.0) * (hi - lo), dt)?;
         }
     }
     let mut solve = false;
@@ -838,7 +856,7 @@ fn apply_command(
         };
         let sol = solve_ik(robot, ctx, f.ee_frame, &world, &f.arm, Some(&seed), &opts)?;
         for &j in &f.arm {
-            r.controller.set_position(robot, j, sol.q[j])?;
+            set_rate_limited(r, robot, ctx, j, sol.q[j], dt)?;
         }
     }
     if let Some(g) = cmd.gripper {
