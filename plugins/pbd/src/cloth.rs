@@ -208,9 +208,9 @@ pub struct Cloth {
     cache_h: f64,
 
     // ---- tethers (derived from attachments)
-    /// `(n)` nearest attached particle (`u32::MAX`: none) and maximal distance to it, m.
-    tether_anchor: Vec<u32>,
-    tether_len: Vec<f64>,
+    /// Tethers as compact rows (particle, its nearest kinematic particle, maximal distance to
+    /// it m), in particle order.
+    tether_rows: Vec<(u32, u32, f64)>,
     /// `(n)` particle adjacency (CSR over mesh edges / distance constraints) for tethers.
     adj_start: Vec<u32>,
     adj: Vec<(u32, f64)>,
@@ -491,8 +491,7 @@ impl Cloth {
             bend_lambda: vec![Vector3::zeros(); bends.len()],
             bend_rows: Vec::new(),
             cache_h: f64::NAN,
-            tether_anchor: vec![u32::MAX; n],
-            tether_len: vec![0.0; n],
+            tether_rows: Vec::new(),
             adj_start,
             adj,
             frames: Vec::new(),
@@ -946,7 +945,7 @@ impl Cloth {
     /// (multi-source Dijkstra over the edge graph, deterministic tie-breaking by index).
     fn rebuild_tethers(&mut self) {
         let n = self.pos.len();
-        self.tether_anchor.iter_mut().for_each(|a| *a = u32::MAX);
+        self.tether_rows.clear();
         if !self.settings.tethers {
             return;
         }
@@ -1007,11 +1006,11 @@ impl Cloth {
                 continue;
             }
             let a = anchor[i] as usize;
-            self.tether_anchor[i] = anchor[i];
-            self.tether_len[i] = match self.settings.tether_metric {
+            let len = match self.settings.tether_metric {
                 TetherMetric::Graph => dist[i],
                 TetherMetric::RestEuclidean => (self.rest[i] - self.rest[a]).norm(),
             };
+            self.tether_rows.push((i as u32, a as u32, len));
         }
     }
 
@@ -1432,29 +1431,18 @@ impl Cloth {
         }
     }
 
+    /// Long-range attachments: a particle farther from its (kinematic, never moving) anchor than
+    /// the tether length is moved back onto the sphere. Branch-free over the compact rows (whether a
+    /// tether is active is data dependent and mispredicted often); anchors have zero inverse mass,
+    /// so rows touch only their own particle and their order does not matter.
     fn solve_tethers(&mut self) {
-        for i in 0..self.pos.len() {
-            let a = self.tether_anchor[i];
-            if a == u32::MAX {
-                continue;
-            }
-            let a = a as usize;
-            let d = self.pos[i] - self.pos[a];
-            let len = self.tether_len[i];
-            let l2 = d.norm_squared();
-            if l2 <= len * len {
-                continue;
-            }
-            let l = l2.sqrt();
-            let c = l - len;
-            let (wi, wa) = (self.inv_mass[i], self.inv_mass[a]);
-            let ws = wi + wa;
-            if ws == 0.0 {
-                continue;
-            }
-            let corr = d * (c / (l * ws));
-            self.pos[i] -= corr * wi;
-            self.pos[a] += corr * wa;
+        let pos = &mut self.pos;
+        for &(i, a, len) in &self.tether_rows {
+            let d = pos[i as usize] - pos[a as usize];
+            let l = d.norm();
+            let c = (l - len).max(0.0);
+            let s = if c > 0.0 { c / l } else { 0.0 };
+            pos[i as usize] -= d * s;
         }
     }
 
