@@ -121,6 +121,20 @@ struct Frame {
     target: Isometry3<f64>,
 }
 
+/// A frame the cloth moves itself: at constant velocity from its initial pose during a time
+/// window (a scripted handle, e.g. a group of particles dragged along the ground).
+#[derive(Debug, Clone, PartialEq)]
+struct Drive {
+    frame: u32,
+    /// Pose of the frame before the window, world frame.
+    origin: Isometry3<f64>,
+    /// Velocity during the window, m/s.
+    velocity: Vector3<f64>,
+    /// Window `[start, stop]` of simulated time, s.
+    start: f64,
+    stop: f64,
+}
+
 /// Particles held by a frame or the world.
 #[derive(Debug, Clone, PartialEq)]
 struct Attachment {
@@ -222,6 +236,8 @@ pub struct Cloth {
     attachments: Vec<Attachment>,
     /// Id the next attachment gets.
     next_attachment: u32,
+    /// Frames the cloth moves itself (configuration, not state: the poses follow from the time).
+    drives: Vec<Drive>,
     /// `(f)` scratch: frame poses at the end of the current substep.
     frame_now: Vec<Isometry3<f64>>,
 
@@ -497,6 +513,7 @@ impl Cloth {
             frames: Vec::new(),
             attachments: Vec::new(),
             next_attachment: 0,
+            drives: Vec::new(),
             frame_now: Vec::new(),
             c_particle: Vec::new(),
             c_point: Vec::new(),
@@ -760,6 +777,45 @@ impl Cloth {
             return Err(PbdError::Unknown(format!("frame {}", frame.0)));
         }
         Ok(self.push_attachment(Some(frame.0), true, f64::INFINITY, particles))
+    }
+
+    /// Pins particles kinematically to a new frame that the cloth itself moves at constant
+    /// `velocity` (m/s, world frame) during the simulated-time window `[start, stop]` (s) and holds
+    /// still before and after (a scripted handle: a group dragged along the ground, a corner
+    /// lifted). The frame's pose follows from the cloth's time, so snapshots need nothing extra;
+    /// [`Cloth::set_frame_pose`] on this frame is overridden at every step.
+    pub fn drive_particles(
+        &mut self,
+        particles: &[u32],
+        velocity: Vector3<f64>,
+        start: f64,
+        stop: f64,
+    ) -> Result<(FrameId, AttachmentId), PbdError> {
+        self.check_particles(particles)?;
+        if !finite3(&velocity) {
+            return Err(PbdError::InvalidParameter {
+                field: "drive velocity",
+                value: format!("{velocity:?}"),
+                expected: "a finite vector (m/s)",
+            });
+        }
+        if !(start.is_finite() && stop.is_finite() && start >= 0.0 && stop >= start) {
+            return Err(PbdError::InvalidParameter {
+                field: "drive window",
+                value: format!("[{start}, {stop}]"),
+                expected: "finite times with 0 <= start <= stop (s)",
+            });
+        }
+        let frame = self.add_frame(Isometry3::identity(), u32::MAX)?;
+        let id = self.pin_to_frame(frame, particles)?;
+        self.drives.push(Drive {
+            frame: frame.0,
+            origin: Isometry3::identity(),
+            velocity,
+            start,
+            stop,
+        });
+        Ok((frame, id))
     }
 
     /// Attaches particles to a frame at their current offsets with a total force limit `max_force`
@@ -1043,6 +1099,11 @@ impl Cloth {
             .iter()
             .map(|a| (a.local.clone(), a.slipped, a.impulse))
             .collect();
+        for d in &self.drives {
+            let moved = (self.time + dt).clamp(d.start, d.stop) - d.start;
+            self.frames[d.frame as usize].target =
+                Translation3::from(d.velocity * moved) * d.origin;
+        }
         let result = self.step_inner(dt, gravity, query);
         let result = result.and_then(|stats| {
             match self
@@ -1702,6 +1763,9 @@ impl Cloth {
                 prev,
                 target,
             });
+        }
+        if self.drives.iter().any(|d| d.frame as usize >= nf) {
+            return Err(bad("a driven frame of this cloth is missing"));
         }
         let next_attachment = r.count()? as u32;
         let na = r.count()?;
