@@ -41,3 +41,59 @@ fn curtain_is_pushed_aside_and_stays_on_its_bar_for_60_s() {
         "the curtain hangs again: {lowest}"
     );
 }
+
+#[test]
+fn folded_cloth_is_dragged_by_its_fold_without_layers_crossing_for_60_s() {
+    use modesuite::engine::env::Env;
+    use modesuite::pbd::testing::layer_crossings;
+    let (at, radius) = (-0.02, 0.01); // the scene's fold
+    let mut env = run("scenes/examples/cloth_folded_drag.scene.ron", 0);
+    // layers from the flat rest shape (pose: translation only): top = beyond the fold's arc,
+    // bottom = triangles before the fold
+    let (top, bottom, start_x) = {
+        let c = &env.app.world.resource::<PbdContext>().bodies[0].solver;
+        let rest = c.rest_positions();
+        let arc_end = at + std::f64::consts::PI * radius;
+        let top: Vec<u32> = (0..rest.len() as u32)
+            .filter(|&i| rest[i as usize].x > arc_end + 0.01)
+            .collect();
+        let bottom: Vec<[u32; 3]> = c
+            .triangles()
+            .iter()
+            .copied()
+            .filter(|t| t.iter().all(|&v| rest[v as usize].x < at))
+            .collect();
+        let x = c.positions().iter().map(|p| p.x).sum::<f64>() / rest.len() as f64;
+        (top, bottom, x)
+    };
+    let step = |env: &mut Env, k: u64| {
+        let o = env.step(&[]);
+        assert!(o.info.error.is_none(), "step {k}: {:?}", o.info.error);
+    };
+    let mut max_cross = 0;
+    let mut lowest = f64::MAX;
+    for k in 0..3600 {
+        step(&mut env, k);
+        if k % 4 == 0 {
+            let c = &env.app.world.resource::<PbdContext>().bodies[0].solver;
+            max_cross = max_cross.max(layer_crossings(c.positions(), &top, &bottom));
+            lowest = c.positions().iter().map(|p| p.z).fold(lowest, f64::min);
+        }
+    }
+    let n = nodes(&mut env, "cloth");
+    assert!(n.iter().all(|p| p.iter().all(|x| x.is_finite())));
+    let c = &env.app.world.resource::<PbdContext>().bodies[0].solver;
+    let x = n.iter().map(|p| p.x).sum::<f64>() / n.len() as f64;
+    let ke = c.kinetic_energy();
+    let s = c.stretch_stats();
+    println!(
+        "folded drag, 60 s: {max_cross} layer crossings (demand 0, checked every 4th step); centroid x {start_x:.3} -> {x:.3} m (handle moved 0.30 m; demand > 0.2); lowest particle z {lowest:.4} m (floor 0, half thickness 0.002); kinetic energy {ke:.2e} J (< 1e-4); stretch mean {:.3} % max {:.2} %",
+        100.0 * s.mean,
+        100.0 * s.max
+    );
+    assert_eq!(max_cross, 0);
+    assert!(x - start_x > 0.2, "the cloth was not dragged");
+    assert!(lowest > 0.0, "a particle went through the floor");
+    assert!(ke < 1e-4, "not at rest after the drag");
+    assert!(s.max < 0.5, "torn-looking stretch {}", s.max);
+}

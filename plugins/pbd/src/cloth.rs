@@ -121,6 +121,20 @@ struct Frame {
     target: Isometry3<f64>,
 }
 
+/// A frame the cloth moves itself: at constant velocity from its initial pose during a time
+/// window (a scripted handle, e.g. a group of particles dragged along the ground).
+#[derive(Debug, Clone, PartialEq)]
+struct Drive {
+    frame: u32,
+    /// Pose of the frame before the window, world frame.
+    origin: Isometry3<f64>,
+    /// Velocity during the window, m/s.
+    velocity: Vector3<f64>,
+    /// Window `[start, stop]` of simulated time, s.
+    start: f64,
+    stop: f64,
+}
+
 /// Particles held by a frame or the world.
 #[derive(Debug, Clone, PartialEq)]
 struct Attachment {
@@ -208,9 +222,9 @@ pub struct Cloth {
     cache_h: f64,
 
     // ---- tethers (derived from attachments)
-    /// `(n)` nearest attached particle (`u32::MAX`: none) and maximal distance to it, m.
-    tether_anchor: Vec<u32>,
-    tether_len: Vec<f64>,
+    /// Tethers as compact rows (particle, its nearest kinematic particle, maximal distance to
+    /// it m), in particle order.
+    tether_rows: Vec<(u32, u32, f64)>,
     /// `(n)` particle adjacency (CSR over mesh edges / distance constraints) for tethers.
     adj_start: Vec<u32>,
     adj: Vec<(u32, f64)>,
@@ -222,6 +236,8 @@ pub struct Cloth {
     attachments: Vec<Attachment>,
     /// Id the next attachment gets.
     next_attachment: u32,
+    /// Frames the cloth moves itself (configuration, not state: the poses follow from the time).
+    drives: Vec<Drive>,
     /// `(f)` scratch: frame poses at the end of the current substep.
     frame_now: Vec<Isometry3<f64>>,
 
@@ -491,13 +507,13 @@ impl Cloth {
             bend_lambda: vec![Vector3::zeros(); bends.len()],
             bend_rows: Vec::new(),
             cache_h: f64::NAN,
-            tether_anchor: vec![u32::MAX; n],
-            tether_len: vec![0.0; n],
+            tether_rows: Vec::new(),
             adj_start,
             adj,
             frames: Vec::new(),
             attachments: Vec::new(),
             next_attachment: 0,
+            drives: Vec::new(),
             frame_now: Vec::new(),
             c_particle: Vec::new(),
             c_point: Vec::new(),
@@ -763,6 +779,45 @@ impl Cloth {
         Ok(self.push_attachment(Some(frame.0), true, f64::INFINITY, particles))
     }
 
+    /// Pins particles kinematically to a new frame that the cloth itself moves at constant
+    /// `velocity` (m/s, world frame) during the simulated-time window `[start, stop]` (s) and holds
+    /// still before and after (a scripted handle: a group dragged along the ground, a corner
+    /// lifted). The frame's pose follows from the cloth's time, so snapshots need nothing extra;
+    /// [`Cloth::set_frame_pose`] on this frame is overridden at every step.
+    pub fn drive_particles(
+        &mut self,
+        particles: &[u32],
+        velocity: Vector3<f64>,
+        start: f64,
+        stop: f64,
+    ) -> Result<(FrameId, AttachmentId), PbdError> {
+        self.check_particles(particles)?;
+        if !finite3(&velocity) {
+            return Err(PbdError::InvalidParameter {
+                field: "drive velocity",
+                value: format!("{velocity:?}"),
+                expected: "a finite vector (m/s)",
+            });
+        }
+        if !(start.is_finite() && stop.is_finite() && start >= 0.0 && stop >= start) {
+            return Err(PbdError::InvalidParameter {
+                field: "drive window",
+                value: format!("[{start}, {stop}]"),
+                expected: "finite times with 0 <= start <= stop (s)",
+            });
+        }
+        let frame = self.add_frame(Isometry3::identity(), u32::MAX)?;
+        let id = self.pin_to_frame(frame, particles)?;
+        self.drives.push(Drive {
+            frame: frame.0,
+            origin: Isometry3::identity(),
+            velocity,
+            start,
+            stop,
+        });
+        Ok((frame, id))
+    }
+
     /// Attaches particles to a frame at their current offsets with a total force limit `max_force`
     /// (N, may be `f64::INFINITY`). Above the limit the particles slip (they are re-anchored
     /// where the limited force leaves them, like kinetic friction). Reactions go to the frame's
@@ -946,7 +1001,7 @@ impl Cloth {
     /// (multi-source Dijkstra over the edge graph, deterministic tie-breaking by index).
     fn rebuild_tethers(&mut self) {
         let n = self.pos.len();
-        self.tether_anchor.iter_mut().for_each(|a| *a = u32::MAX);
+        self.tether_rows.clear();
         if !self.settings.tethers {
             return;
         }
@@ -1007,11 +1062,11 @@ impl Cloth {
                 continue;
             }
             let a = anchor[i] as usize;
-            self.tether_anchor[i] = anchor[i];
-            self.tether_len[i] = match self.settings.tether_metric {
+            let len = match self.settings.tether_metric {
                 TetherMetric::Graph => dist[i],
                 TetherMetric::RestEuclidean => (self.rest[i] - self.rest[a]).norm(),
             };
+            self.tether_rows.push((i as u32, a as u32, len));
         }
     }
 
@@ -1044,6 +1099,11 @@ impl Cloth {
             .iter()
             .map(|a| (a.local.clone(), a.slipped, a.impulse))
             .collect();
+        for d in &self.drives {
+            let moved = (self.time + dt).clamp(d.start, d.stop) - d.start;
+            self.frames[d.frame as usize].target =
+                Translation3::from(d.velocity * moved) * d.origin;
+        }
         let result = self.step_inner(dt, gravity, query);
         let result = result.and_then(|stats| {
             match self
@@ -1432,29 +1492,18 @@ impl Cloth {
         }
     }
 
+    /// Long-range attachments: a particle farther from its (kinematic, never moving) anchor than
+    /// the tether length is moved back onto the sphere. Branch-free over the compact rows (whether a
+    /// tether is active is data dependent and mispredicted often); anchors have zero inverse mass,
+    /// so rows touch only their own particle and their order does not matter.
     fn solve_tethers(&mut self) {
-        for i in 0..self.pos.len() {
-            let a = self.tether_anchor[i];
-            if a == u32::MAX {
-                continue;
-            }
-            let a = a as usize;
-            let d = self.pos[i] - self.pos[a];
-            let len = self.tether_len[i];
-            let l2 = d.norm_squared();
-            if l2 <= len * len {
-                continue;
-            }
-            let l = l2.sqrt();
-            let c = l - len;
-            let (wi, wa) = (self.inv_mass[i], self.inv_mass[a]);
-            let ws = wi + wa;
-            if ws == 0.0 {
-                continue;
-            }
-            let corr = d * (c / (l * ws));
-            self.pos[i] -= corr * wi;
-            self.pos[a] += corr * wa;
+        let pos = &mut self.pos;
+        for &(i, a, len) in &self.tether_rows {
+            let d = pos[i as usize] - pos[a as usize];
+            let l = d.norm();
+            let c = (l - len).max(0.0);
+            let s = if c > 0.0 { c / l } else { 0.0 };
+            pos[i as usize] -= d * s;
         }
     }
 
@@ -1714,6 +1763,9 @@ impl Cloth {
                 prev,
                 target,
             });
+        }
+        if self.drives.iter().any(|d| d.frame as usize >= nf) {
+            return Err(bad("a driven frame of this cloth is missing"));
         }
         let next_attachment = r.count()? as u32;
         let na = r.count()?;

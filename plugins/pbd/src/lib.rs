@@ -75,5 +75,5 @@ pub use cloth::{
 pub use coupling::{ContactQuery, NoColliders, PointContact, Reaction};
 pub use error::PbdError;
 pub use material::{ClothMaterial, SolverSettings, TetherMetric};
-pub use mesh::GridSheet;
+pub use mesh::{fold_positions, GridSheet};
 pub use plugin::{ClothKind, ClothParams, PbdContext, PbdPlugin};

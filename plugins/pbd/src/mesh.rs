@@ -100,6 +100,33 @@ impl GridSheet {
     }
 }
 
+/// Folds a flat sheet lying in a plane `z = const` onto itself about the line `x = at`: points
+/// with `x <= at` stay, the next `pi * radius` of material (measured along x) wraps around a
+/// half-cylinder of radius `radius` whose axis is parallel to y, and the rest lies on top, `2 *
+/// radius` higher, running back towards -x. Lengths along the sheet are kept (an isometry), so the
+/// folded shape is at rest for the stretch constraints. `radius` must be > 0.
+pub fn fold_positions(positions: &[Vector3<f64>], at: f64, radius: f64) -> Vec<Vector3<f64>> {
+    let arc = std::f64::consts::PI * radius;
+    positions
+        .iter()
+        .map(|p| {
+            let u = p.x - at;
+            if u <= 0.0 {
+                *p
+            } else if u <= arc {
+                let phi = u / radius;
+                Vector3::new(
+                    at + radius * phi.sin(),
+                    p.y,
+                    p.z + radius * (1.0 - phi.cos()),
+                )
+            } else {
+                Vector3::new(at - (u - arc), p.y, p.z + 2.0 * radius)
+            }
+        })
+        .collect()
+}
+
 /// Edge of the triangle mesh with its adjacent data.
 #[derive(Debug, Clone)]
 pub(crate) struct MeshEdge {

@@ -11,7 +11,10 @@
 //! Every material and solver field is optional (defaults of [`ClothMaterial`] and
 //! [`SolverSettings`]; `friction` defaults to the object's material). `pins` fix the selected
 //! particles ([`NodeSelect`], object frame) to the world; `groups` name particle sets (a task's
-//! handle, tracked points).
+//! handle, tracked points); `fold: Some((at: 0.0, radius: 0.01))` starts the sheet folded onto
+//! itself ([`crate::fold_positions`]); `drags: [(select: ..., velocity: (0.1, 0.0, 0.0), start:
+//! 1.0, stop: 4.0)]` moves particle sets at constant velocity (scripted handles). Selections
+//! apply to the flat rest shape.
 //!
 //! State: [`PbdContext`] holds every cloth of the env and is part of the snapshot. The cloth step
 //! runs once per engine substep in `SubstepSystems::Solve`, before the rigid step, queries the
@@ -71,6 +74,39 @@ pub struct ClothParams {
     /// Named particle groups.
     #[serde(default)]
     pub groups: BTreeMap<String, NodeSelect>,
+    /// Start folded onto itself (the flat shape stays the rest shape).
+    #[serde(default)]
+    pub fold: Option<FoldParams>,
+    /// Particle sets moved at constant velocity during a time window (scripted handles).
+    #[serde(default)]
+    pub drags: Vec<DragParams>,
+}
+
+/// A fold of the sheet in its own (object) frame, see [`crate::fold_positions`]: the material
+/// beyond the line `x = at` wraps around a half-cylinder of radius `radius` and lies on top.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FoldParams {
+    /// Where the fold starts along the object's x axis, m.
+    pub at: f64,
+    /// Fold radius, m (> 0; at least the thickness keeps the layers apart).
+    pub radius: f64,
+}
+
+/// Particles pinned to a handle that moves at constant velocity during a time window and holds
+/// still before and after ([`Cloth::drive_particles`]).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DragParams {
+    /// The particles (object frame, selected in the flat rest shape).
+    pub select: NodeSelect,
+    /// Velocity, m/s, world frame.
+    pub velocity: (f64, f64, f64),
+    /// Start of the motion, s of simulated time.
+    #[serde(default)]
+    pub start: f64,
+    /// End of the motion, s.
+    pub stop: f64,
 }
 
 /// A compiled cloth object (shared by all envs).
@@ -88,6 +124,10 @@ pub struct CompiledCloth {
     pub pins: Vec<Vec<u32>>,
     /// Named groups.
     pub groups: Vec<(String, Vec<u32>)>,
+    /// Initial positions when they differ from the rest shape (a folded start), world frame, m.
+    pub initial: Option<Vec<Vector3<f64>>>,
+    /// Driven particle sets: particles, velocity m/s, start s, stop s.
+    pub drags: Vec<(Vec<u32>, Vector3<f64>, f64, f64)>,
 }
 
 /// Every cloth of one env (part of the env state).
@@ -193,11 +233,42 @@ impl BodyKind for ClothKind {
                     .map(|sel| (name.clone(), sel))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let positions = surface
-            .positions
+        let drags = params
+            .drags
             .iter()
-            .map(|p| (pose * Point3::from(*p)).coords)
-            .collect();
+            .enumerate()
+            .map(|(i, d)| {
+                let sel = d
+                    .select
+                    .select(&format!("{path}.drags[{i}].select"), &surface.positions)?;
+                Ok((
+                    sel,
+                    Vector3::new(d.velocity.0, d.velocity.1, d.velocity.2),
+                    d.start,
+                    d.stop,
+                ))
+            })
+            .collect::<Result<Vec<_>, SceneError>>()?;
+        let to_world = |local: &[Vector3<f64>]| -> Vec<Vector3<f64>> {
+            local
+                .iter()
+                .map(|p| (pose * Point3::from(*p)).coords)
+                .collect()
+        };
+        let positions = to_world(&surface.positions);
+        let initial = match &params.fold {
+            None => None,
+            Some(f) if f.at.is_finite() && f.radius.is_finite() && f.radius > 0.0 => Some(
+                to_world(&crate::fold_positions(&surface.positions, f.at, f.radius)),
+            ),
+            Some(f) => {
+                return Err(SceneError::semantic(
+                    format!("{path}.fold"),
+                    format!("(at: {}, radius: {})", f.at, f.radius),
+                    "a finite `at` and a finite radius > 0 m",
+                ))
+            }
+        };
         let compiled = CompiledCloth {
             positions,
             triangles: surface.triangles,
@@ -205,10 +276,11 @@ impl BodyKind for ClothKind {
             settings,
             pins,
             groups,
+            initial,
+            drags,
         };
         // Build once here so that every construction error is a compile error, not a spawn error.
-        Cloth::new(&compiled.positions, &compiled.triangles, material, settings)
-            .map_err(|e| SceneError::semantic(path, "(cloth)", e.to_string()))?;
+        build_cloth(&compiled).map_err(|e| SceneError::semantic(path, "(cloth)", e.to_string()))?;
         Ok(Arc::new(compiled))
     }
 
@@ -225,16 +297,27 @@ impl BodyKind for ClothKind {
                 "a body compiled by pbd.cloth",
             )
         })?;
-        let err = |e: crate::PbdError| SceneError::semantic("pbd.cloth", "(spawn)", e.to_string());
-        let mut cloth =
-            Cloth::new(&c.positions, &c.triangles, c.material, c.settings).map_err(err)?;
-        for pin in &c.pins {
-            cloth.pin_to_world(pin).map_err(err)?;
-        }
-        for (name, g) in &c.groups {
-            cloth.add_group(name, g).map_err(err)?;
-        }
+        let cloth = build_cloth(c)
+            .map_err(|e| SceneError::semantic("pbd.cloth", "(spawn)", e.to_string()))?;
         PbdContext::spawn_into(app, entity, cloth);
         Ok(())
     }
+}
+
+/// The cloth of a compiled object: rest shape, initial (folded) positions, pins, groups, drags.
+fn build_cloth(c: &CompiledCloth) -> Result<Cloth, crate::PbdError> {
+    let mut cloth = Cloth::new(&c.positions, &c.triangles, c.material, c.settings)?;
+    if let Some(initial) = &c.initial {
+        cloth.set_positions(initial)?;
+    }
+    for pin in &c.pins {
+        cloth.pin_to_world(pin)?;
+    }
+    for (name, g) in &c.groups {
+        cloth.add_group(name, g)?;
+    }
+    for (particles, velocity, start, stop) in &c.drags {
+        cloth.drive_particles(particles, *velocity, *start, *stop)?;
+    }
+    Ok(cloth)
 }

@@ -208,6 +208,33 @@ impl ContactQuery for AnalyticColliders {
     }
 }
 
+/// Layer crossings of a cloth folded onto itself (layers roughly horizontal, `bottom` below):
+/// the number of `top` particles whose xy projection falls inside a `bottom` triangle and that lie
+/// below that triangle's plane there. 0 while the layers never pass through each other.
+pub fn layer_crossings(positions: &[Vector3<f64>], top: &[u32], bottom: &[[u32; 3]]) -> usize {
+    let mut cross = 0;
+    for &i in top {
+        let q = positions[i as usize];
+        for tri in bottom {
+            let [x, y, z] = tri.map(|v| positions[v as usize]);
+            let det = (y.x - x.x) * (z.y - x.y) - (z.x - x.x) * (y.y - x.y);
+            if det.abs() < 1e-14 {
+                continue;
+            }
+            let u = ((y.x - q.x) * (z.y - q.y) - (z.x - q.x) * (y.y - q.y)) / det;
+            let v = ((z.x - q.x) * (x.y - q.y) - (x.x - q.x) * (z.y - q.y)) / det;
+            let w = 1.0 - u - v;
+            if u >= 0.0 && v >= 0.0 && w >= 0.0 {
+                if q.z < u * x.z + v * y.z + w * z.z {
+                    cross += 1;
+                }
+                break;
+            }
+        }
+    }
+    cross
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -488,3 +488,45 @@ fn task_cloths_build_and_step() {
     }
     assert!(curtain.positions()[fixed[0] as usize] == hanging[fixed[0] as usize]);
 }
+
+#[test]
+fn driven_particles_move_only_in_their_window_and_bad_drives_are_rejected() {
+    let sheet = GridSheet::new(0.2, 0.2, 3, 3, Vector3::zeros()).unwrap();
+    let mut c = Cloth::new(
+        &sheet.positions,
+        &sheet.triangles,
+        ClothMaterial::default(),
+        SolverSettings::default(),
+    )
+    .unwrap();
+    let p = sheet.index(0, 0);
+    let v = Vector3::new(0.3, 0.0, 0.0);
+    let (start, stop) = (0.5, 1.0);
+    c.drive_particles(&[p], v, start, stop).unwrap();
+    let x0 = c.positions()[p as usize];
+    let mut r = Vec::new();
+    let dt = 1.0 / 60.0;
+    let mut before = x0;
+    for k in 1..=90 {
+        c.step(dt, &Vector3::zeros(), &NoColliders, &mut r).unwrap();
+        let t = k as f64 * dt;
+        if t <= start {
+            before = c.positions()[p as usize];
+        }
+    }
+    let moved = c.positions()[p as usize] - x0;
+    let want = v * (stop - start);
+    println!(
+        "driven particle: moved {:.6} m before the window (0), {:.6} m in total (want {:.6})",
+        (before - x0).norm(),
+        moved.x,
+        want.x
+    );
+    assert!((before - x0).norm() < 1e-15);
+    assert!((moved - want).norm() < 1e-12);
+    assert!(c
+        .drive_particles(&[p], Vector3::new(f64::NAN, 0.0, 0.0), 0.0, 1.0)
+        .is_err());
+    assert!(c.drive_particles(&[p], v, 1.0, 0.5).is_err());
+    assert!(c.drive_particles(&[999], v, 0.0, 1.0).is_err());
+}

@@ -1,7 +1,7 @@
 //! Cloth rows of ../shared/VALIDATION.md that need more than a few hundred steps, plus the grasp
 //! row of "Contact and friction". Each test prints its measured figure next to the tolerance.
 
-use modesuite_pbd::testing::{AnalyticCollider, AnalyticColliders, Shape};
+use modesuite_pbd::testing::{self, AnalyticCollider, AnalyticColliders, Shape};
 use modesuite_pbd::*;
 use nalgebra::{Isometry3, Vector3};
 
@@ -151,18 +151,8 @@ fn fold_and_pull(self_collision: bool, steps: usize) -> (usize, usize) {
     let rho = 0.01;
     let a = len / 2.0 - std::f64::consts::PI * rho / 2.0;
     let z0 = 0.5 * material.thickness + 1e-4;
-    let flat = GridSheet::new(len, width, nx, ny, Vector3::zeros()).unwrap();
-    let place = |u: f64, y: f64| -> Vector3<f64> {
-        if u <= a {
-            Vector3::new(u, y, z0)
-        } else if u <= a + std::f64::consts::PI * rho {
-            let phi = (u - a) / rho;
-            Vector3::new(a + rho * phi.sin(), y, z0 + rho * (1.0 - phi.cos()))
-        } else {
-            Vector3::new(a - (u - a - std::f64::consts::PI * rho), y, z0 + 2.0 * rho)
-        }
-    };
-    let folded: Vec<Vector3<f64>> = flat.positions.iter().map(|p| place(p.x, p.y)).collect();
+    let flat = GridSheet::new(len, width, nx, ny, Vector3::new(0.0, 0.0, z0)).unwrap();
+    let folded = fold_positions(&flat.positions, a, rho);
     let mut cloth = Cloth::new(&flat.positions, &flat.triangles, material, settings).unwrap();
     cloth.set_positions(&folded).unwrap();
     let table = AnalyticColliders::new(vec![AnalyticCollider::fixed(
@@ -173,8 +163,8 @@ fn fold_and_pull(self_collision: bool, steps: usize) -> (usize, usize) {
         0.6,
     )]);
     // top layer: rest u beyond the fold by 2 cm; bottom triangles: all vertices before the fold
-    let top: Vec<usize> = (0..flat.positions.len())
-        .filter(|&i| flat.positions[i].x > a + std::f64::consts::PI * rho + 0.02)
+    let top: Vec<u32> = (0..flat.positions.len() as u32)
+        .filter(|&i| flat.positions[i as usize].x > a + std::f64::consts::PI * rho + 0.02)
         .collect();
     let bottom: Vec<[u32; 3]> = flat
         .triangles
@@ -183,7 +173,6 @@ fn fold_and_pull(self_collision: bool, steps: usize) -> (usize, usize) {
         .filter(|t| t.iter().all(|&v| flat.positions[v as usize].x < a))
         .collect();
     let edge: Vec<u32> = (0..ny).map(|j| flat.index(nx - 1, j)).collect();
-    let start = folded[edge[0] as usize];
     let frame = cloth.add_frame(Isometry3::identity(), u32::MAX).unwrap();
     cloth.attach_to_frame(frame, &edge, f64::INFINITY).unwrap();
     let mut r = Vec::new();
@@ -194,34 +183,12 @@ fn fold_and_pull(self_collision: bool, steps: usize) -> (usize, usize) {
         // press the edge down onto the bottom layer over 1 s, then drag it along +y at 3 cm/s
         let dz = -(2.0 * rho) * (t / 1.0).min(1.0);
         let dy = 0.03 * (t - 1.0).max(0.0);
-        let _ = start;
         cloth
             .set_frame_pose(frame, Isometry3::translation(0.0, dy, dz))
             .unwrap();
         let s = cloth.step(DT, &gravity(), &table, &mut r).unwrap();
         pairs = pairs.max(s.self_collision_pairs);
-        let p = cloth.positions();
-        let mut cross = 0;
-        for &i in &top {
-            let q = p[i];
-            for tri in &bottom {
-                let [x, y, z] = tri.map(|v| p[v as usize]);
-                let det = (y.x - x.x) * (z.y - x.y) - (z.x - x.x) * (y.y - x.y);
-                if det.abs() < 1e-14 {
-                    continue;
-                }
-                let u = ((y.x - q.x) * (z.y - q.y) - (z.x - q.x) * (y.y - q.y)) / det;
-                let v = ((z.x - q.x) * (x.y - q.y) - (x.x - q.x) * (z.y - q.y)) / det;
-                let w = 1.0 - u - v;
-                if u >= 0.0 && v >= 0.0 && w >= 0.0 {
-                    let zb = u * x.z + v * y.z + w * z.z;
-                    if q.z < zb {
-                        cross += 1;
-                    }
-                    break;
-                }
-            }
-        }
+        let cross = testing::layer_crossings(cloth.positions(), &top, &bottom);
         max_cross = max_cross.max(cross);
     }
     (max_cross, pairs)
