@@ -68,11 +68,11 @@ const SPOT_ARM: &[&str] = &[
     "arm_sh0", "arm_sh1", "arm_el0", "arm_el1", "arm_wr0", "arm_wr1",
 ];
 
-/// Position gain of Spot's leg joints, N m/rad: the knee's standing load (about 20 N m) costs
-/// about 0.05 rad of error.
-pub const LEG_KP: f64 = 400.0;
+/// Position gain of Spot's leg joints, N m/rad (the walking controller's gain): the knee's
+/// standing load (about 20 N m) costs about 0.025 rad of error.
+pub const LEG_KP: f64 = 800.0;
 /// Velocity gain of Spot's leg joints, N m s/rad.
-pub const LEG_KD: f64 = 10.0;
+pub const LEG_KD: f64 = 15.0;
 
 /// Spot standing pose: hip pitch 0.77 rad and knee -1.43 rad put each foot under its hip with
 /// the body origin 0.55 m above the floor (foot sphere radius included).
