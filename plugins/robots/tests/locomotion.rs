@@ -203,11 +203,11 @@ fn leg_kinematics_match_the_simulated_robot() {
         let mut q = robot.joint_positions(&ctx).unwrap();
         let mut legs_q = [[0.0; 3]; 4];
         for (l, kin) in trot.legs().iter().enumerate() {
-            for k in 0..3 {
-                // Stay a little inside the limits; knee bent enough for a unique branch.
+            for (k, slot) in legs_q[l].iter_mut().enumerate() {
+                // Stay a little inside the limits.
                 let (lo, hi) = (kin.lower[k] + 0.05, kin.upper[k] - 0.05);
                 let v = rng.range(lo, hi);
-                legs_q[l][k] = v;
+                *slot = v;
                 let name = spec.leg_joints[3 * l + k];
                 q[robot.joint_index(name).unwrap()] = v;
             }
