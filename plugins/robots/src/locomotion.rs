@@ -546,9 +546,9 @@ impl TrotController {
         });
         let mut h_sum = 0.0;
         let mut h_n = 0usize;
-        for l in 0..NUM_LEGS {
-            if !self.feet[l].swing {
-                h_sum += -measured[l].z + self.legs[l].foot_radius;
+        for ((foot, kin), m) in self.feet.iter().zip(&self.legs).zip(&measured) {
+            if !foot.swing {
+                h_sum += -m.z + kin.foot_radius;
                 h_n += 1;
             }
         }
@@ -606,6 +606,7 @@ impl TrotController {
             q: [0.0; 12],
             qd: [0.0; 12],
         };
+        #[allow(clippy::needless_range_loop)] // several per-leg arrays, one borrowed mutably
         for l in 0..NUM_LEGS {
             let kin = self.legs[l];
             let nominal = kin.nominal_foot(p.body_height);

@@ -203,11 +203,11 @@ fn leg_kinematics_match_the_simulated_robot() {
         let mut q = robot.joint_positions(&ctx).unwrap();
         let mut legs_q = [[0.0; 3]; 4];
         for (l, kin) in trot.legs().iter().enumerate() {
-            for k in 0..3 {
-                // Stay a little inside the limits; knee bent enough for a unique branch.
+            for (k, slot) in legs_q[l].iter_mut().enumerate() {
+                // Stay a little inside the limits.
                 let (lo, hi) = (kin.lower[k] + 0.05, kin.upper[k] - 0.05);
                 let v = rng.range(lo, hi);
-                legs_q[l][k] = v;
+                *slot = v;
                 let name = spec.leg_joints[3 * l + k];
                 q[robot.joint_index(name).unwrap()] = v;
             }
@@ -543,11 +543,30 @@ fn walking_spot_steps_per_second() {
     };
     w.run(cmd, 1.0, &mut worst);
     let n = 1200;
+    let (mut t_trot, mut t_joint, mut t_physics) = (0.0, 0.0, 0.0);
     let t0 = std::time::Instant::now();
     for _ in 0..n {
-        w.control_step(cmd, |_, _| {}, &mut worst);
+        let a = std::time::Instant::now();
+        w.trot
+            .step(&w.robot, &w.ctx, cmd, CONTROL_DT, &mut w.ctl)
+            .unwrap();
+        t_trot += a.elapsed().as_secs_f64();
+        for _ in 0..SUBSTEPS {
+            let b = std::time::Instant::now();
+            w.ctl.apply(&w.robot, &mut w.ctx).unwrap();
+            let c = std::time::Instant::now();
+            w.ctx.step(DT).unwrap();
+            t_joint += (c - b).as_secs_f64();
+            t_physics += c.elapsed().as_secs_f64();
+        }
     }
     let secs = t0.elapsed().as_secs_f64();
+    println!(
+        "time split: trot controller {:.1} %, joint controller (PD + gravity compensation, every substep) {:.1} %, rapier step {:.1} %",
+        100.0 * t_trot / secs,
+        100.0 * t_joint / secs,
+        100.0 * t_physics / secs
+    );
     println!(
         "walking spot: {n} control steps (dt 1/60 s, 4 substeps) in {secs:.3} s = {:.0} control steps/s ({:.0} substeps/s), target >= 2000",
         n as f64 / secs,
