@@ -61,3 +61,15 @@ impl HashState for DeformableNodes {
         }
     }
 }
+
+/// Joint state of an articulated object (a robot), written by its plugin in `Writeback`; what
+/// observation terms and compiled plugins read.
+#[derive(Component, Debug, Clone, PartialEq, Default)]
+pub struct JointState {
+    /// Joint names, in the robot's order.
+    pub names: Vec<String>,
+    /// Joint positions, rad (revolute) or m (prismatic).
+    pub positions: Vec<f64>,
+    /// Joint velocities, rad/s or m/s.
+    pub velocities: Vec<f64>,
+}
