@@ -88,9 +88,9 @@ pub enum EngineSystems {
     /// systems that write `StepSignals` order themselves `.before(EngineSystems::TimeLimit)`.
     /// The scene's reward and termination terms ([`crate::terms`]) run first in this set.
     TimeLimit,
-    /// The scene's observation terms, inside [`EnvSystems::Observe`]: they fill the
-    /// `ObservationBuffer` from scratch when the scene has any, so systems that append to the
-    /// buffer order themselves `.after(EngineSystems::Observations)`.
+    /// The scene's observation terms ([`crate::terms`]), after [`EnvSystems::Evaluate`] and just
+    /// before [`EnvSystems::Observe`] (in both phases): when the scene has any, they fill the
+    /// `ObservationBuffer` from scratch; systems in `Observe` may then append to it or replace it.
     Observations,
 }
 
@@ -315,7 +315,11 @@ impl SimApp {
                 .chain()
                 .in_set(EngineSystems::TimeLimit),
         );
-        env_step.configure_sets(EngineSystems::Observations.in_set(EnvSystems::Observe));
+        env_step.configure_sets(
+            EngineSystems::Observations
+                .after(EnvSystems::Evaluate)
+                .before(EnvSystems::Observe),
+        );
         env_step.add_systems(crate::terms::observe_scene_terms.in_set(EngineSystems::Observations));
         let mut physics = new_schedule(PhysicsStep);
         physics.configure_sets(

@@ -169,8 +169,7 @@ fn deformable_step<S: DeformableSolver>(
 ) {
     let dt = settings.substep_dt();
     // Time at the start of this substep: the physics step's start plus the substeps done in it.
-    let time =
-        clock.time + (clock.substeps % u64::from(settings.substeps.max(1))) as f64 * dt;
+    let time = clock.time + (clock.substeps % u64::from(settings.substeps.max(1))) as f64 * dt;
     let mut reactions: Vec<Reaction> = Vec::new();
     let mut empty = PluginStates::default();
     let mut buffer = Vec::new();

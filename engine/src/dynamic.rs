@@ -203,7 +203,10 @@ extern "C" fn sink_volume(
         let t = copy_array(tets, n_tets, 4, "tetrahedra")?;
         Ok(Some(GeneratedMesh::Volume(VolumeMesh {
             nodes: to_vectors(&p),
-            tets: t.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
+            tets: t
+                .chunks_exact(4)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect(),
         })))
     });
 }
@@ -795,4 +798,3 @@ impl SimApp {
         Ok(self.add_plugins(vec![plugin as Arc<dyn Plugin>]))
     }
 }
-

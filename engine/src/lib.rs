@@ -56,10 +56,10 @@ pub use scene::{SceneDesc, SceneError, SceneModel, SceneSource};
 /// Re-exports of the math and ECS crates, so plugins use the same versions.
 pub mod deps {
     pub use bevy_ecs;
+    pub use modesuite_plugin_abi as plugin_abi;
     pub use nalgebra;
     pub use parry3d;
     pub use rapier3d;
-    pub use modesuite_plugin_abi as plugin_abi;
     pub use ron;
 }
 

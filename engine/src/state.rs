@@ -236,7 +236,10 @@ pub struct PluginStates {
 impl PluginStates {
     /// Declares `len` slots for `owner` (zeroed; an existing declaration is resized).
     pub fn declare(&mut self, owner: &str, len: usize) {
-        self.slots.entry(owner.to_string()).or_default().resize(len, 0.0);
+        self.slots
+            .entry(owner.to_string())
+            .or_default()
+            .resize(len, 0.0);
     }
 
     /// The slots of `owner` (empty when none were declared).
@@ -246,9 +249,7 @@ impl PluginStates {
 
     /// The slots of `owner`, mutable (empty when none were declared).
     pub fn get_mut(&mut self, owner: &str) -> &mut [f64] {
-        self.slots
-            .get_mut(owner)
-            .map_or(&mut [], Vec::as_mut_slice)
+        self.slots.get_mut(owner).map_or(&mut [], Vec::as_mut_slice)
     }
 }
 

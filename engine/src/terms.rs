@@ -15,9 +15,9 @@
 //! env. Each step, in [`EngineSystems::TimeLimit`](crate::EngineSystems::TimeLimit) before the time
 //! limit, rewards add `weight x value` to `StepSignals::reward` (and `reward/<term>` to its values)
 //! and a non-zero termination value sets `terminated`; in
-//! [`EngineSystems::Observations`](crate::EngineSystems::Observations) the observation terms fill
-//! the `ObservationBuffer` from scratch, in order (the observation space is set when the scene is
-//! spawned). Passive forces run inside the deformable step of every substep ([`crate::deformable`]).
+//! [`EngineSystems::Observations`](crate::EngineSystems::Observations) (just before
+//! `EnvSystems::Observe`) the observation terms fill the `ObservationBuffer` from scratch, in
+//! order (the observation space is set when the scene is spawned). Passive forces run inside the deformable step of every substep ([`crate::deformable`]).
 //!
 //! Terms read a [`WorldView`] (object poses and velocities, deformable nodes, joint state) and may
 //! keep state in [`PluginStates`] (part of the env snapshot). A term error ends the episode with
@@ -125,7 +125,8 @@ pub trait PassiveForce: Send + Sync + 'static {
 /// A passive force with its parameters (immutable, shared by every env).
 pub trait ConfiguredForce: Send + Sync + 'static {
     /// Adds forces (N, world frame), one per node, into `forces`.
-    fn add_forces(&self, ctx: &mut ForceContext, forces: &mut [Vector3<f64>]) -> Result<(), String>;
+    fn add_forces(&self, ctx: &mut ForceContext, forces: &mut [Vector3<f64>])
+        -> Result<(), String>;
 }
 
 /// A configured reward term of a scene.
@@ -278,7 +279,10 @@ pub(crate) fn evaluate_scene_terms(
             Ok(()) => {
                 let v = r.weight * out[0];
                 signals.reward += v;
-                *signals.values.entry(format!("reward/{}", r.name)).or_default() += v;
+                *signals
+                    .values
+                    .entry(format!("reward/{}", r.name))
+                    .or_default() += v;
             }
             Err(e) => errors.raise(e),
         }
@@ -298,7 +302,7 @@ pub(crate) fn evaluate_scene_terms(
     }
 }
 
-/// The scene's observation terms (in `EngineSystems::Observations`): fill the buffer from scratch.
+/// The scene's observation terms (`EngineSystems::Observations`): fill the buffer from scratch.
 pub(crate) fn observe_scene_terms(
     terms: Option<Res<SceneTerms>>,
     query: ViewQuery,

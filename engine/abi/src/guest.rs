@@ -10,8 +10,8 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use crate::{
     caps, AbiStr, ForceCall, ForceDecl, MeshSink, ObjectView, PluginDecl, ShapeDecl, TermCall,
-    TermDecl, TextSink, WorldView, ABI_VERSION, MESH_SURFACE, MESH_VOLUME, STATUS_ERROR,
-    STATUS_OK, STATUS_PANIC, TERM_OBSERVATION, TERM_REWARD, TERM_TERMINATION,
+    TermDecl, TextSink, WorldView, ABI_VERSION, MESH_SURFACE, MESH_VOLUME, STATUS_ERROR, STATUS_OK,
+    STATUS_PANIC, TERM_OBSERVATION, TERM_REWARD, TERM_TERMINATION,
 };
 
 /// Which mesh the host asks a generator for.
@@ -415,11 +415,7 @@ extern "C" fn term_evaluate(user: *const c_void, call: *const TermCall) -> i32 {
     })
 }
 
-extern "C" fn force_configure(
-    user: *const c_void,
-    params: AbiStr,
-    error: *const TextSink,
-) -> i32 {
+extern "C" fn force_configure(user: *const c_void, params: AbiStr, error: *const TextSink) -> i32 {
     guarded(error, || {
         // SAFETY: `user` was set by `Exported::new` to a `ForceDef` leaked for the process.
         let def = unsafe { &*user.cast::<ForceDef>() };

@@ -28,8 +28,8 @@ pub use select::NodeSelect;
 
 use crate::components::{Object, Pose};
 use crate::registry::{BodyCompileContext, BodyKind, CompiledBody, Registry, TermKind};
-use crate::terms::ConfiguredTerm;
 use crate::shapes::{ShapeContext, ShapeDesc, ShapeError, SurfaceMesh};
+use crate::terms::ConfiguredTerm;
 use crate::{SimApp, SimSettings};
 
 /// Where a scene came from: used for error messages and to resolve relative mesh paths.

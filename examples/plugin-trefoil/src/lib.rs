@@ -90,7 +90,8 @@ fn fall_progress(ctx: &mut TermContext) -> Result<(), String> {
 
 fn centroid(ctx: &mut TermContext) -> Result<(), String> {
     let p: ObjectParams = parse(ctx.params)?;
-    ctx.out.copy_from_slice(&centroid_of(&ctx.world, &p.object)?);
+    ctx.out
+        .copy_from_slice(&centroid_of(&ctx.world, &p.object)?);
     Ok(())
 }
 

@@ -131,11 +131,16 @@ pub fn validate(p: &TrefoilParams) -> Result<(), String> {
         return Err(format!("segments = {}: an integer in 3..=64", p.segments));
     }
     if !(12..=4096).contains(&p.stations) {
-        return Err(format!("stations = {}: an integer in 12..=4096", p.stations));
+        return Err(format!(
+            "stations = {}: an integer in 12..=4096",
+            p.stations
+        ));
     }
     // The tube must not fold on itself: radius below the smallest radius of curvature...
     let samples = 4 * p.stations as usize;
-    let ts: Vec<f64> = (0..samples).map(|i| TAU * i as f64 / samples as f64).collect();
+    let ts: Vec<f64> = (0..samples)
+        .map(|i| TAU * i as f64 / samples as f64)
+        .collect();
     let min_bend = ts
         .iter()
         .map(|&t| {
@@ -153,7 +158,10 @@ pub fn validate(p: &TrefoilParams) -> Result<(), String> {
     }
     // ...and strands that pass each other must stay apart.
     let points: Vec<V3> = ts.iter().map(|&t| curve(p, t)).collect();
-    let arc: Vec<f64> = ts.iter().map(|&t| norm(curve_d1(p, t)) * TAU / samples as f64).collect();
+    let arc: Vec<f64> = ts
+        .iter()
+        .map(|&t| norm(curve_d1(p, t)) * TAU / samples as f64)
+        .collect();
     let total: f64 = arc.iter().sum();
     let mut cum = vec![0.0; samples];
     for i in 1..samples {
@@ -264,7 +272,10 @@ pub fn mesh(p: &TrefoilParams) -> (Vec<V3>, Vec<[u32; 4]>) {
         nodes.push(c);
         for j in 0..m {
             let phi = TAU * j as f64 / m as f64;
-            let offset = add(scale(n, p.radius * phi.cos()), scale(b, p.radius * phi.sin()));
+            let offset = add(
+                scale(n, p.radius * phi.cos()),
+                scale(b, p.radius * phi.sin()),
+            );
             nodes.push(add(c, offset));
         }
     }
