@@ -37,7 +37,8 @@
 //! A plugin that keeps state declares `state_len`; each environment gets that many `f64`
 //! slots (zero at the start), passed to every term and force call. The host owns the slots and
 //! saves them in the environment's snapshot, so reset and determinism checks cover them: a
-//! plugin must keep **all** of its mutable state there (no globals).
+//! plugin must keep **all** of its mutable state there (no globals). Callbacks are called from
+//! several threads at once (one environment per thread) and must be thread-safe.
 //!
 //! Every callback returns [`STATUS_OK`], [`STATUS_ERROR`] or [`STATUS_PANIC`] and reports a
 //! message through the host's [`TextSink`]. A panic must never unwind across `extern "C"` (that
