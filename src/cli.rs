@@ -8,9 +8,12 @@
 //!   `episodes`, `success_rate`, `mean_return`, `mean_length`, `errors`, `env_steps_per_s`).
 //! - `modesuite bench NAME [--json]`: with `--json`, one JSON object per line per case with at
 //!   least `case`, `steps_per_s`, `threads`, `envs`.
+//! - `--plugin PATH` (repeatable) on `run`, `validate` and `list` loads a compiled plugin (C ABI,
+//!   see `modesuite_engine::dynamic`); nothing is ever loaded because a scene names it.
 
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
@@ -19,6 +22,7 @@ use serde_json::json;
 use modesuite_engine::bench::{BenchOptions, BenchRecord};
 use modesuite_engine::prelude::*;
 use modesuite_engine::scene::{self, SceneModel};
+use modesuite_engine::{DynamicPlugin, PluginLoadError};
 
 /// Command-line arguments.
 #[derive(Parser, Debug)]
@@ -39,14 +43,20 @@ pub struct Cli {
 pub enum Command {
     /// List tasks, robots, shapes, body kinds, terms, sensors and plugins.
     List {
-        /// Only this category: tasks, robots, shapes, body-kinds, terms, sensors, plugins.
+        /// Only this category: tasks, robots, shapes, body-kinds, terms, forces, sensors, plugins.
         what: Option<String>,
+        /// Load a compiled plugin (C ABI) first; repeatable.
+        #[arg(long)]
+        plugin: Vec<PathBuf>,
     },
     /// Parse, validate and compile scene files; exit 2 on the first error.
     Validate {
         /// Scene files (`*.scene.ron`).
         #[arg(required = true)]
         files: Vec<PathBuf>,
+        /// Load a compiled plugin (C ABI) first; repeatable.
+        #[arg(long)]
+        plugin: Vec<PathBuf>,
     },
     /// Run a scene file or a task id and report per-episode metrics.
     Run(RunArgs),
@@ -86,7 +96,7 @@ pub struct RunArgs {
     /// Print one JSON object per episode and a summary object.
     #[arg(long)]
     pub json: bool,
-    /// Load a compiled plugin (C ABI).
+    /// Load a compiled plugin (C ABI) before reading the scene; repeatable.
     #[arg(long)]
     pub plugin: Vec<PathBuf>,
 }
@@ -121,6 +131,12 @@ impl From<SceneError> for CliError {
     }
 }
 
+impl From<PluginLoadError> for CliError {
+    fn from(e: PluginLoadError) -> Self {
+        Self::input(format!("--plugin: {e}"))
+    }
+}
+
 /// A fresh app with every default plugin.
 pub fn default_app() -> SimApp {
     let mut app = SimApp::new();
@@ -138,12 +154,26 @@ pub fn env_from_text(text: &str) -> Result<Env, SceneError> {
     Ok(Env::new(app))
 }
 
+/// Loads the compiled plugins named by `--plugin` (once; every env shares them).
+pub fn load_plugins(paths: &[PathBuf]) -> Result<Vec<Arc<DynamicPlugin>>, PluginLoadError> {
+    paths.iter().map(DynamicPlugin::load).collect()
+}
+
+/// A fresh app with every default plugin and the given compiled plugins.
+pub fn app_with_plugins(plugins: &[Arc<DynamicPlugin>]) -> Result<SimApp, PluginLoadError> {
+    let mut app = default_app();
+    for p in plugins {
+        app.add_dynamic_plugin(p.clone())?;
+    }
+    Ok(app)
+}
+
 /// Runs the CLI; returns the process exit code's error on failure.
 pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
     match cli.command {
         None => run_default(out),
-        Some(Command::List { what }) => list(what.as_deref(), out),
-        Some(Command::Validate { files }) => validate(&files, out),
+        Some(Command::List { what, plugin }) => list(what.as_deref(), &load_plugins(&plugin)?, out),
+        Some(Command::Validate { files, plugin }) => validate(&files, &load_plugins(&plugin)?, out),
         Some(Command::Run(args)) => run(&args, out),
         Some(Command::Bench {
             name,
@@ -176,11 +206,15 @@ fn run_default(out: &mut dyn Write) -> Result<(), CliError> {
         json: false,
         plugin: Vec::new(),
     };
-    run_scene(&desc, &source, &args, out)
+    run_scene(&desc, &source, &args, &[], out)
 }
 
-fn list(what: Option<&str>, out: &mut dyn Write) -> Result<(), CliError> {
-    let app = default_app();
+fn list(
+    what: Option<&str>,
+    plugins: &[Arc<DynamicPlugin>],
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    let app = app_with_plugins(plugins)?;
     let reg = app.registry();
     let all = what.is_none();
     let want = |k: &str| all || what == Some(k);
@@ -190,6 +224,7 @@ fn list(what: Option<&str>, out: &mut dyn Write) -> Result<(), CliError> {
         "shapes",
         "body-kinds",
         "terms",
+        "forces",
         "sensors",
         "plugins",
     ];
@@ -276,6 +311,15 @@ fn list(what: Option<&str>, out: &mut dyn Write) -> Result<(), CliError> {
                 .collect(),
         )?;
     }
+    if want("forces") {
+        section(
+            "passive forces",
+            reg.forces
+                .values()
+                .map(|f| (f.name().to_string(), f.description().to_string()))
+                .collect(),
+        )?;
+    }
     if want("sensors") {
         section(
             "sensors",
@@ -290,23 +334,36 @@ fn list(what: Option<&str>, out: &mut dyn Write) -> Result<(), CliError> {
             "plugins",
             app.plugin_names()
                 .into_iter()
-                .map(|n| (n, String::new()))
+                .map(|n| {
+                    let loaded = plugins.iter().find(|p| p.plugin_name() == n);
+                    let d = loaded.map_or_else(String::new, |p| {
+                        format!("{} (compiled, {})", p.description(), p.path().display())
+                    });
+                    (n, d)
+                })
                 .collect(),
         )?;
     }
     Ok(())
 }
 
-fn compile_file(path: &Path) -> Result<(std::sync::Arc<SceneModel>, SimApp), CliError> {
+fn compile_file(
+    path: &Path,
+    plugins: &[Arc<DynamicPlugin>],
+) -> Result<(Arc<SceneModel>, SimApp), CliError> {
     let (desc, source) = scene::load_file(path)?;
-    let app = default_app();
+    let app = app_with_plugins(plugins)?;
     let model = app.compile_scene(&desc, &source)?;
     Ok((model, app))
 }
 
-fn validate(files: &[PathBuf], out: &mut dyn Write) -> Result<(), CliError> {
+fn validate(
+    files: &[PathBuf],
+    plugins: &[Arc<DynamicPlugin>],
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
     for f in files {
-        let (model, _) = compile_file(f)?;
+        let (model, _) = compile_file(f, plugins)?;
         writeln!(
             out,
             "{}: ok ({} objects, dt {} s x {} substeps, decimation {})",
@@ -322,15 +379,11 @@ fn validate(files: &[PathBuf], out: &mut dyn Write) -> Result<(), CliError> {
 }
 
 fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    if !args.plugin.is_empty() {
-        return Err(CliError::input(
-            "--plugin: loading compiled plugins is not implemented yet (the plugin ABI issue adds it)",
-        ));
-    }
+    let plugins = load_plugins(&args.plugin)?;
     let path = Path::new(&args.target);
     if path.is_file() {
         let (desc, source) = scene::load_file(path)?;
-        return run_scene(&desc, &source, args, out);
+        return run_scene(&desc, &source, args, &plugins, out);
     }
     if args.target.starts_with("MoDe-") {
         return Err(CliError::input(format!(
@@ -387,9 +440,10 @@ fn run_scene(
     desc: &SceneDesc,
     source: &SceneSource,
     args: &RunArgs,
+    plugins: &[Arc<DynamicPlugin>],
     out: &mut dyn Write,
 ) -> Result<(), CliError> {
-    let mut app = default_app();
+    let mut app = app_with_plugins(plugins)?;
     let model = app.compile_scene(desc, source)?;
     let steps = args.steps.or(model.episode_steps).unwrap_or(600);
     if steps == 0 {

@@ -316,13 +316,18 @@ fn spot_figure_eight_scene_walks_both_loops() {
 
 #[test]
 fn arm_joint_targets_respect_velocity_limits() {
-    let mut e = env(&franka_scene("(arm: JointPosition, base: Off, gripper: Off)"));
+    let mut e = env(&franka_scene(
+        "(arm: JointPosition, base: Off, gripper: Off)",
+    ));
     // Joint 1 asked to jump across its whole range (5.8 rad).
     let mut a = vec![0.0f32; 7];
     a[0] = 1.0;
     let (limit, j) = {
         let r = &e.app.world.resource::<Robots>().robots[0];
-        (r.fixed.robot.joints[r.fixed.arm[0]].velocity, r.fixed.arm[0])
+        (
+            r.fixed.robot.joints[r.fixed.arm[0]].velocity,
+            r.fixed.arm[0],
+        )
     };
     let mut peak: f64 = 0.0;
     for _ in 0..60 {

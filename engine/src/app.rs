@@ -86,7 +86,12 @@ pub enum SubstepSystems {
 pub enum EngineSystems {
     /// The time-limit truncation, inside [`EnvSystems::Evaluate`]; termination and reward
     /// systems that write `StepSignals` order themselves `.before(EngineSystems::TimeLimit)`.
+    /// The scene's reward and termination terms ([`crate::terms`]) run first in this set.
     TimeLimit,
+    /// The scene's observation terms ([`crate::terms`]), after [`EnvSystems::Evaluate`] and just
+    /// before [`EnvSystems::Observe`] (in both phases): when the scene has any, they fill the
+    /// `ObservationBuffer` from scratch; systems in `Observe` may then append to it or replace it.
+    Observations,
 }
 
 /// Which pass of [`EnvStep`] is running.
@@ -288,6 +293,7 @@ impl SimApp {
         world.register_component::<crate::components::Pose>();
         world.register_component::<crate::components::Velocity>();
         world.register_component::<crate::components::DeformableNodes>();
+        world.register_component::<crate::components::JointState>();
 
         let mut env_step = new_schedule(EnvStep);
         env_step.configure_sets(
@@ -307,7 +313,17 @@ impl SimApp {
                 .in_set(EnvSystems::Simulate),
         );
         env_step.configure_sets(EngineSystems::TimeLimit.in_set(EnvSystems::Evaluate));
-        env_step.add_systems(crate::scene::time_limit.in_set(EngineSystems::TimeLimit));
+        env_step.add_systems(
+            (crate::terms::evaluate_scene_terms, crate::scene::time_limit)
+                .chain()
+                .in_set(EngineSystems::TimeLimit),
+        );
+        env_step.configure_sets(
+            EngineSystems::Observations
+                .after(EnvSystems::Evaluate)
+                .before(EnvSystems::Observe),
+        );
+        env_step.add_systems(crate::terms::observe_scene_terms.in_set(EngineSystems::Observations));
         let mut physics = new_schedule(PhysicsStep);
         physics.configure_sets(
             (
@@ -465,6 +481,26 @@ impl SimApp {
     pub fn register_term(&mut self, term: crate::registry::TermEntry) -> &mut Self {
         self.registry_mut().terms.insert(term.name.clone(), term);
         self
+    }
+
+    /// Registers a passive force on deformables (RON: `passive_forces: [(force: "...", ...)]`).
+    pub fn register_passive_force(
+        &mut self,
+        force: Arc<dyn crate::terms::PassiveForce>,
+    ) -> &mut Self {
+        self.registry_mut()
+            .forces
+            .insert(force.name().to_string(), force);
+        self
+    }
+
+    /// Declares `len` f64 state slots for `owner` in [`crate::state::PluginStates`] (part of the
+    /// env state: saved in snapshots, restored on reset, hashed).
+    pub fn declare_plugin_state(&mut self, owner: &str, len: usize) -> &mut Self {
+        self.world
+            .get_resource_or_insert_with(crate::state::PluginStates::default)
+            .declare(owner, len);
+        self.register_stateful::<crate::state::PluginStates>()
     }
 
     /// Registers a robot under its name.

@@ -14,11 +14,12 @@ use bevy_ecs::prelude::*;
 use nalgebra::Vector3;
 
 use crate::app::SimErrors;
-use crate::components::DeformableNodes;
+use crate::components::{DeformableNodes, Object};
 use crate::coupling::{ContactQuery, NoColliders, Reaction};
 use crate::rigid::{DeformableSystems, RigidContext};
-use crate::state::{StateHasher, Stateful};
-use crate::{SimApp, SimSettings};
+use crate::state::{PluginStates, StateHasher, Stateful};
+use crate::terms::{passive_forces_for, ForceContext, SceneTerms};
+use crate::{SimApp, SimClock, SimSettings};
 
 /// What the engine needs from a deformable solver.
 pub trait DeformableSolver: Send + Sync + 'static {
@@ -38,6 +39,18 @@ pub trait DeformableSolver: Send + Sync + 'static {
     fn save(&self) -> Vec<f64>;
     /// Restores a state made by `save` of this same body.
     fn load(&mut self, state: &[f64]) -> Result<(), String>;
+    /// Current node velocities, m/s, world frame, when the solver keeps them (handed to passive
+    /// forces; default: none).
+    fn node_velocities(&self) -> Option<&[Vector3<f64>]> {
+        None
+    }
+    /// Sets the passive (external) force on every node for the coming step(s), N, world frame,
+    /// one per node (the scene's `passive_forces`, see [`crate::terms`]). It is part of the
+    /// solver's state. Default: the solver takes no external forces (an error).
+    fn set_passive_forces(&mut self, forces: &[Vector3<f64>]) -> Result<(), String> {
+        let _ = forces;
+        Err("this solver does not accept passive forces".to_string())
+    }
 }
 
 /// One deformable body of an env.
@@ -118,16 +131,64 @@ impl<S: DeformableSolver> Stateful for DeformableContext<S> {
     }
 }
 
+/// The scene's passive forces on one body (see [`crate::terms`]): computed from its current
+/// nodes and handed to the solver before it steps.
+fn apply_passive_forces<S: DeformableSolver>(
+    terms: &SceneTerms,
+    object: &Object,
+    solver: &mut S,
+    time: f64,
+    dt: f64,
+    states: &mut PluginStates,
+    buffer: &mut Vec<Vector3<f64>>,
+) -> Result<(), String> {
+    let mut ctx = ForceContext {
+        object: &object.name,
+        time,
+        dt,
+        nodes: solver.node_positions(),
+        velocities: solver.node_velocities(),
+        states,
+    };
+    if passive_forces_for(terms, object, &mut ctx, buffer)? {
+        solver.set_passive_forces(buffer)?;
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
 fn deformable_step<S: DeformableSolver>(
     mut ctx: ResMut<DeformableContext<S>>,
     mut rigid: Option<ResMut<RigidContext>>,
     settings: Res<SimSettings>,
+    clock: Res<SimClock>,
+    terms: Option<Res<SceneTerms>>,
+    mut states: Option<ResMut<PluginStates>>,
     mut errors: ResMut<SimErrors>,
-    names: Query<&crate::components::Object>,
+    names: Query<&Object>,
 ) {
     let dt = settings.substep_dt();
+    // Time at the start of this substep: the physics step's start plus the substeps done in it.
+    let time = clock.time + (clock.substeps % u64::from(settings.substeps.max(1))) as f64 * dt;
     let mut reactions: Vec<Reaction> = Vec::new();
+    let mut empty = PluginStates::default();
+    let mut buffer = Vec::new();
     for body in &mut ctx.bodies {
+        if let (Some(terms), Ok(object)) = (terms.as_deref(), names.get(body.entity)) {
+            let states = states.as_deref_mut().unwrap_or(&mut empty);
+            if let Err(e) = apply_passive_forces(
+                terms,
+                object,
+                &mut body.solver,
+                time,
+                dt,
+                states,
+                &mut buffer,
+            ) {
+                errors.raise(format!("object \"{}\": {e}", object.name));
+                continue;
+            }
+        }
         let query: &dyn ContactQuery = match rigid.as_deref() {
             Some(r) => r,
             None => &NoColliders,

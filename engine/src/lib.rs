@@ -33,6 +33,7 @@ pub mod components;
 pub mod coupling;
 pub mod deformable;
 pub mod dump;
+pub mod dynamic;
 pub mod env;
 pub mod math;
 pub mod registry;
@@ -41,11 +42,13 @@ pub mod rng;
 pub mod scene;
 pub mod shapes;
 pub mod state;
+pub mod terms;
 
 pub use app::{
     EngineSystems, EnvStep, EnvSystems, Phase, PhysicsStep, PhysicsSystems, Plugin, PluginGroup,
     Plugins, SimApp, SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
 };
+pub use dynamic::{DynamicPlugin, PluginLoadError};
 pub use env::{Env, EnvInfo, Space, Spaces, StepOutcome, VecEnv, VecStep};
 pub use rigid::{DeformableSystems, RigidContext, RigidPlugin, RigidSystems};
 pub use scene::{SceneDesc, SceneError, SceneModel, SceneSource};
@@ -53,6 +56,7 @@ pub use scene::{SceneDesc, SceneError, SceneModel, SceneSource};
 /// Re-exports of the math and ECS crates, so plugins use the same versions.
 pub mod deps {
     pub use bevy_ecs;
+    pub use modesuite_plugin_abi as plugin_abi;
     pub use nalgebra;
     pub use parry3d;
     pub use rapier3d;
@@ -74,7 +78,7 @@ pub mod prelude {
         EngineSystems, EnvStep, EnvSystems, Phase, PhysicsStep, PhysicsSystems, Plugin,
         PluginGroup, SimApp, SimClock, SimErrors, SimSettings, Substep, SubstepSystems,
     };
-    pub use crate::components::{DeformableNodes, Object, Pose, Velocity};
+    pub use crate::components::{DeformableNodes, JointState, Object, Pose, Velocity};
     pub use crate::coupling::{ContactQuery, PointContact, Reaction};
     pub use crate::env::{Env, EnvInfo, Space, Spaces, StepOutcome, VecEnv};
     pub use crate::rigid::{DeformableSystems, RigidContext, RigidPlugin, RigidSystems};

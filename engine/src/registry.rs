@@ -144,8 +144,9 @@ pub enum TermKind {
     Event,
 }
 
-/// A named task term. The payload is owned by the plugin that defines the term protocol
-/// (the tasks plugin downcasts it to its term function type).
+/// A named task term. The payload is owned by the plugin that defines the term protocol; terms
+/// made with [`TermEntry::new`] carry an engine [`Term`](crate::terms::Term), which scene term
+/// sections and the tasks plugin evaluate.
 #[derive(Clone)]
 pub struct TermEntry {
     /// Registry name, e.g. `distance_xy`.
@@ -156,6 +157,29 @@ pub struct TermEntry {
     pub description: String,
     /// The term's implementation, type-erased.
     pub payload: Arc<dyn Any + Send + Sync>,
+}
+
+impl TermEntry {
+    /// An entry whose payload is an engine [`Term`](crate::terms::Term) (usable in the scene's
+    /// `rewards`, `terminations` and `observations` sections).
+    pub fn new(
+        name: impl Into<String>,
+        kind: TermKind,
+        description: impl Into<String>,
+        term: Arc<dyn crate::terms::Term>,
+    ) -> Self {
+        Self {
+            name: name.into(),
+            kind,
+            description: description.into(),
+            payload: Arc::new(term),
+        }
+    }
+
+    /// The engine term of this entry, when its payload is one (see [`TermEntry::new`]).
+    pub fn term(&self) -> Option<&Arc<dyn crate::terms::Term>> {
+        self.payload.downcast_ref::<Arc<dyn crate::terms::Term>>()
+    }
 }
 
 /// A named robot (model + controllers), type-erased payload owned by the robots plugin.
@@ -195,6 +219,32 @@ pub struct Registry {
     pub sensors: BTreeMap<String, SensorEntry>,
     /// Scene section handlers by key.
     pub sections: BTreeMap<String, Arc<dyn SceneSection>>,
+    /// Passive forces on deformables by name.
+    pub forces: BTreeMap<String, Arc<dyn crate::terms::PassiveForce>>,
+}
+
+impl Registry {
+    /// Which registry already uses `name`, if any (shapes, body kinds, terms, robots, sensors,
+    /// passive forces), to refuse a second registration from a compiled plugin.
+    pub fn name_in_use(&self, name: &str) -> Option<&'static str> {
+        if self.shapes.contains_key(name) {
+            Some("shape generator")
+        } else if self.body_kinds.contains_key(name) {
+            Some("body kind")
+        } else if self.terms.contains_key(name) {
+            Some("term")
+        } else if self.robots.contains_key(name) {
+            Some("robot")
+        } else if self.sensors.contains_key(name) {
+            Some("sensor")
+        } else if self.forces.contains_key(name) {
+            Some("passive force")
+        } else if self.sections.contains_key(name) {
+            Some("scene section")
+        } else {
+            None
+        }
+    }
 }
 
 impl crate::shapes::ShapeGenerators for Registry {

@@ -224,3 +224,50 @@ pub fn state_hash(world: &World) -> u64 {
     }
     h.finish()
 }
+
+/// State slots of plugins that cannot own a Rust resource (compiled C ABI plugins): `len` f64
+/// values per owner, zero at spawn, saved in snapshots and hashed like every other part of the
+/// state. Declared with [`SimApp::declare_plugin_state`](crate::SimApp::declare_plugin_state).
+#[derive(Resource, Debug, Clone, Default, PartialEq)]
+pub struct PluginStates {
+    slots: std::collections::BTreeMap<String, Vec<f64>>,
+}
+
+impl PluginStates {
+    /// Declares `len` slots for `owner` (zeroed; an existing declaration is resized).
+    pub fn declare(&mut self, owner: &str, len: usize) {
+        self.slots
+            .entry(owner.to_string())
+            .or_default()
+            .resize(len, 0.0);
+    }
+
+    /// The slots of `owner` (empty when none were declared).
+    pub fn get(&self, owner: &str) -> &[f64] {
+        self.slots.get(owner).map_or(&[], Vec::as_slice)
+    }
+
+    /// The slots of `owner`, mutable (empty when none were declared).
+    pub fn get_mut(&mut self, owner: &str) -> &mut [f64] {
+        self.slots.get_mut(owner).map_or(&mut [], Vec::as_mut_slice)
+    }
+}
+
+impl Stateful for PluginStates {
+    fn save_state(&self) -> Box<dyn Any + Send + Sync> {
+        Box::new(self.clone())
+    }
+    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) {
+        if let Some(s) = state.downcast_ref::<Self>() {
+            self.clone_from(s);
+        }
+    }
+    fn hash_state(&self, h: &mut StateHasher) {
+        for (owner, slots) in &self.slots {
+            h.write_str(owner);
+            for x in slots {
+                h.write_f64(*x);
+            }
+        }
+    }
+}

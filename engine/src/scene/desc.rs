@@ -56,6 +56,60 @@ pub struct SceneDesc {
     /// Scene-level sections owned by plugins (robots, cameras, tasks), kept as raw RON.
     #[serde(default)]
     pub extensions: BTreeMap<String, Box<RawValue>>,
+    /// Reward terms: the step reward is the sum of `weight x value` (see `crate::terms`).
+    #[serde(default)]
+    pub rewards: Vec<RewardDesc>,
+    /// Termination terms: a non-zero value ends the episode (terminated).
+    #[serde(default)]
+    pub terminations: Vec<TermDesc>,
+    /// Observation terms: their values, in order, are the env's observation.
+    #[serde(default)]
+    pub observations: Vec<TermDesc>,
+    /// Passive forces on deformable objects, applied every substep.
+    #[serde(default)]
+    pub passive_forces: Vec<PassiveForceDesc>,
+}
+
+fn unit_weight() -> f64 {
+    1.0
+}
+
+/// A reward term of a scene: `(term: "acme.height", weight: 2.0, params: (object: "box"))`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RewardDesc {
+    /// Registered term name (of kind Reward).
+    pub term: String,
+    /// Weight (default 1).
+    #[serde(default = "unit_weight")]
+    pub weight: f64,
+    /// The term's parameters, raw RON (default `()`).
+    #[serde(default)]
+    pub params: Option<Box<RawValue>>,
+}
+
+/// An observation or termination term of a scene: `(term: "acme.below", params: (z: 0.1))`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TermDesc {
+    /// Registered term name.
+    pub term: String,
+    /// The term's parameters, raw RON (default `()`).
+    #[serde(default)]
+    pub params: Option<Box<RawValue>>,
+}
+
+/// A passive force of a scene: `(force: "acme.wind", objects: ["tube"], params: (...))`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PassiveForceDesc {
+    /// Registered passive force name.
+    pub force: String,
+    /// Names of the deformable objects it acts on.
+    pub objects: Vec<String>,
+    /// The force's parameters, raw RON (default `()`).
+    #[serde(default)]
+    pub params: Option<Box<RawValue>>,
 }
 
 /// Timing and gravity of the simulation.

@@ -19,13 +19,17 @@ use bevy_ecs::prelude::*;
 use nalgebra::{Isometry3, Vector3};
 use ron::value::RawValue;
 
-pub use desc::{BodyDesc, MaterialDesc, ObjectDesc, PhysicsDesc, PoseDesc, SceneDesc};
+pub use desc::{
+    BodyDesc, MaterialDesc, ObjectDesc, PassiveForceDesc, PhysicsDesc, PoseDesc, RewardDesc,
+    SceneDesc, TermDesc,
+};
 pub use error::SceneError;
 pub use select::NodeSelect;
 
 use crate::components::{Object, Pose};
-use crate::registry::{BodyCompileContext, BodyKind, CompiledBody, Registry};
+use crate::registry::{BodyCompileContext, BodyKind, CompiledBody, Registry, TermKind};
 use crate::shapes::{ShapeContext, ShapeDesc, ShapeError, SurfaceMesh};
+use crate::terms::ConfiguredTerm;
 use crate::{SimApp, SimSettings};
 
 /// Where a scene came from: used for error messages and to resolve relative mesh paths.
@@ -214,6 +218,8 @@ pub struct SceneModel {
     pub description: Option<String>,
     /// Where it came from.
     pub source: SceneSource,
+    /// Configured reward, termination and observation terms and passive forces.
+    pub terms: crate::terms::SceneTerms,
 }
 
 /// One compiled plugin-owned scene section.
@@ -639,6 +645,7 @@ fn compile_inner(
             compiled,
         });
     }
+    let terms = compile_terms(desc, registry, &objects)?;
     Ok(SceneModel {
         settings,
         objects,
@@ -648,7 +655,161 @@ fn compile_inner(
         extensions: desc.extensions.clone(),
         description: desc.description.clone(),
         source: source.clone(),
+        terms,
     })
+}
+
+fn params_text(params: &Option<Box<RawValue>>) -> &str {
+    params.as_deref().map_or("()", RawValue::get_ron)
+}
+
+/// Looks up and configures one term of a scene section.
+fn configure_term(
+    registry: &Registry,
+    section: &str,
+    i: usize,
+    name: &str,
+    kind: TermKind,
+    params: &Option<Box<RawValue>>,
+) -> Result<Arc<dyn ConfiguredTerm>, SceneError> {
+    let of_kind = || {
+        registry
+            .terms
+            .values()
+            .filter(|t| t.kind == kind && t.term().is_some())
+            .map(|t| t.name.clone())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let entry = registry.terms.get(name).ok_or_else(|| {
+        SceneError::semantic(
+            format!("{section}[{i}].term"),
+            format!("{name:?}"),
+            format!(
+                "a registered {kind:?} term: [{}]; a term from a compiled plugin needs `--plugin PATH`",
+                of_kind()
+            ),
+        )
+    })?;
+    if entry.kind != kind {
+        return Err(SceneError::semantic(
+            format!("{section}[{i}].term"),
+            format!("{name:?} (a {:?} term)", entry.kind),
+            format!("a {kind:?} term: [{}]", of_kind()),
+        ));
+    }
+    let term = entry.term().ok_or_else(|| {
+        SceneError::semantic(
+            format!("{section}[{i}].term"),
+            format!("{name:?}"),
+            "a term usable in scene sections; this one is evaluated by its plugin's own managers",
+        )
+    })?;
+    let text = params_text(params);
+    term.configure(text).map_err(|e| {
+        SceneError::semantic(format!("{section}[{i}] \"{name}\".params"), text.trim(), e)
+    })
+}
+
+/// Configures the scene's term sections and passive forces with the registry.
+fn compile_terms(
+    desc: &SceneDesc,
+    registry: &Registry,
+    objects: &[ObjectModel],
+) -> Result<crate::terms::SceneTerms, SceneError> {
+    use crate::terms::{ForceModel, RewardModel, TermModel};
+    let mut out = crate::terms::SceneTerms::default();
+    for (i, r) in desc.rewards.iter().enumerate() {
+        if !r.weight.is_finite() {
+            return Err(SceneError::semantic(
+                format!("rewards[{i}].weight"),
+                r.weight.to_string(),
+                "a finite number",
+            ));
+        }
+        let term = configure_term(registry, "rewards", i, &r.term, TermKind::Reward, &r.params)?;
+        out.rewards.push(RewardModel {
+            name: r.term.clone(),
+            weight: r.weight,
+            term,
+        });
+    }
+    for (section, list, kind, dest) in [
+        (
+            "terminations",
+            &desc.terminations,
+            TermKind::Termination,
+            &mut out.terminations,
+        ),
+        (
+            "observations",
+            &desc.observations,
+            TermKind::Observation,
+            &mut out.observations,
+        ),
+    ] {
+        for (i, t) in list.iter().enumerate() {
+            let term = configure_term(registry, section, i, &t.term, kind, &t.params)?;
+            if kind != TermKind::Observation && term.dim() != 1 {
+                return Err(SceneError::semantic(
+                    format!("{section}[{i}].term"),
+                    format!("{:?} ({} values)", t.term, term.dim()),
+                    "a term with exactly one value",
+                ));
+            }
+            dest.push(TermModel {
+                name: t.term.clone(),
+                term,
+            });
+        }
+    }
+    for (i, f) in desc.passive_forces.iter().enumerate() {
+        let force = registry.forces.get(&f.force).ok_or_else(|| {
+            SceneError::semantic(
+                format!("passive_forces[{i}].force"),
+                format!("{:?}", f.force),
+                format!(
+                    "a registered passive force: [{}]; a force from a compiled plugin needs `--plugin PATH`",
+                    registry.forces.keys().cloned().collect::<Vec<_>>().join(", ")
+                ),
+            )
+        })?;
+        let mut indices = Vec::with_capacity(f.objects.len());
+        for (k, name) in f.objects.iter().enumerate() {
+            let idx = objects.iter().position(|o| &o.name == name);
+            match idx.map(|j| (j, &objects[j].body)) {
+                Some((j, BodyModel::Plugin { .. })) => indices.push(j as u32),
+                Some(_) => {
+                    return Err(SceneError::semantic(
+                        format!("passive_forces[{i}].objects[{k}]"),
+                        format!("{name:?}"),
+                        "a deformable object (a plugin body kind such as fem.solid); rigid bodies take no passive forces",
+                    ))
+                }
+                None => {
+                    return Err(SceneError::semantic(
+                        format!("passive_forces[{i}].objects[{k}]"),
+                        format!("{name:?}"),
+                        "the name of an object of the scene",
+                    ))
+                }
+            }
+        }
+        let text = params_text(&f.params);
+        let configured = force.configure(text).map_err(|e| {
+            SceneError::semantic(
+                format!("passive_forces[{i}] \"{}\".params", f.force),
+                text.trim(),
+                e,
+            )
+        })?;
+        out.forces.push(ForceModel {
+            name: f.force.clone(),
+            objects: indices,
+            force: configured,
+        });
+    }
+    Ok(out)
 }
 
 /// Spawns a compiled scene into an app (called by [`SimApp::spawn_scene`]).
@@ -656,6 +817,20 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
     app.world.insert_resource(model.settings);
     app.world.insert_resource(NamedFrames(model.frames.clone()));
     app.world.insert_resource(EpisodeLimit(model.episode_steps));
+    if !model.terms.is_empty() {
+        app.world.insert_resource(model.terms.clone());
+    }
+    if !model.terms.observations.is_empty() {
+        let dim = model.terms.observation_dim();
+        let action = app
+            .world
+            .get_resource::<crate::env::Spaces>()
+            .map_or_else(|| crate::env::Space::unbounded(0), |s| s.action.clone());
+        app.world.insert_resource(crate::env::Spaces {
+            observation: crate::env::Space::unbounded(dim),
+            action,
+        });
+    }
     let has_rigid = model
         .objects
         .iter()

@@ -103,7 +103,7 @@ pub enum ShapeError {
         problem: String,
     },
     /// A `Gen` shape names a generator that is not registered.
-    #[error("unknown shape generator '{name}'; registered generators: [{}]", known.join(", "))]
+    #[error("unknown shape generator '{name}'; registered generators: [{}]; a generator from a compiled plugin is loaded with `--plugin PATH`", known.join(", "))]
     UnknownGenerator {
         /// The name in the scene.
         name: String,

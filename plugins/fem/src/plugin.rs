@@ -87,6 +87,12 @@ impl DeformableSolver for FemSolid {
     fn load(&mut self, state: &[f64]) -> Result<(), String> {
         self.set_state(state).map_err(|e| e.to_string())
     }
+    fn node_velocities(&self) -> Option<&[Vector3<f64>]> {
+        Some(self.velocities())
+    }
+    fn set_passive_forces(&mut self, forces: &[Vector3<f64>]) -> Result<(), String> {
+        self.set_external_forces(forces).map_err(|e| e.to_string())
+    }
 }
 
 /// Adds the `fem.solid` body kind and the solid systems.

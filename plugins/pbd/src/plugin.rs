@@ -154,6 +154,9 @@ impl DeformableSolver for Cloth {
     fn load(&mut self, state: &[f64]) -> Result<(), String> {
         self.set_state(state).map_err(|e| e.to_string())
     }
+    fn node_velocities(&self) -> Option<&[Vector3<f64>]> {
+        Some(self.velocities())
+    }
 }
 
 /// Adds the `pbd.cloth` body kind and the cloth systems.
