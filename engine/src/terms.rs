@@ -366,3 +366,68 @@ pub fn passive_forces_for(
     }
     Ok(any)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::registry::{TermEntry, TermKind};
+    use crate::{Env, RigidPlugin, SimApp};
+
+    /// A static Rust term: the height of the object named in its parameters, counted in a
+    /// plugin state slot.
+    struct Height;
+    struct HeightOf(String);
+
+    impl Term for Height {
+        fn configure(&self, params_ron: &str) -> Result<Arc<dyn ConfiguredTerm>, String> {
+            let name: String = ron::from_str(params_ron).map_err(|e| e.to_string())?;
+            Ok(Arc::new(HeightOf(name)))
+        }
+    }
+
+    impl ConfiguredTerm for HeightOf {
+        fn dim(&self) -> usize {
+            1
+        }
+        fn evaluate(&self, ctx: &mut TermContext, out: &mut [f64]) -> Result<(), String> {
+            ctx.states.get_mut("test")[0] += 1.0;
+            let o = ctx.world.object(&self.0).ok_or("no such object")?;
+            out[0] = o.pose.translation.z;
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn static_reward_terms_are_weighted_and_their_state_resets() {
+        let mut app = SimApp::new();
+        app.add_plugins(RigidPlugin);
+        app.declare_plugin_state("test", 1);
+        app.register_term(TermEntry::new(
+            "test.height",
+            TermKind::Reward,
+            "height",
+            Arc::new(Height),
+        ));
+        let desc = crate::scene::parse_str(
+            r#"Scene(objects: [(name: "box", shape: Box(size: (0.1, 0.1, 0.1)), pose: (pos: (0.0, 0.0, 1.0)), body: Kinematic)],
+                     rewards: [(term: "test.height", weight: 2.0, params: "box")])"#,
+            "<test>",
+        )
+        .unwrap();
+        let model = app
+            .compile_scene(&desc, &crate::SceneSource::in_memory("."))
+            .unwrap();
+        app.spawn_scene(model).unwrap();
+        let mut env = Env::new(app);
+        env.reset(Some(0));
+        for _ in 0..3 {
+            let o = env.step(&[]);
+            assert_eq!(o.reward, 2.0);
+            assert_eq!(o.info.values["reward/test.height"], 2.0);
+        }
+        let states = env.app.world.resource::<PluginStates>();
+        assert_eq!(states.get("test"), &[3.0]);
+        env.reset(None);
+        assert_eq!(env.app.world.resource::<PluginStates>().get("test"), &[0.0]);
+    }
+}
