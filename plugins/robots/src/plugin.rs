@@ -17,8 +17,8 @@
 //! env state, so resets and snapshots restore it.
 //!
 //! Systems: in `EnvSystems::ProcessActions` each robot reads its slice of the action (see
-//! [`crate::actions`]) or follows its `script`; in `SubstepSystems::Predict` the joint
-//! controllers write motor targets and gravity compensation before every rapier substep; in
+//! [`crate::actions`]) or follows its `script`; in `SubstepSystems::Predict` the walking
+//! controllers plan and the joint controllers write motor targets and gravity compensation before every rapier substep; in
 //! `PhysicsSystems::Writeback` the joint states are copied to the root entities.
 
 use std::sync::Arc;
@@ -82,10 +82,6 @@ impl Plugin for RobotsPlugin {
         app.add_systems(
             modesuite_engine::EnvStep,
             robot_actions.in_set(EnvSystems::ProcessActions),
-        );
-        app.add_systems(
-            modesuite_engine::PhysicsStep,
-            robot_gait.in_set(PhysicsSystems::ApplyActions),
         );
         app.add_systems(Substep, robot_control.in_set(SubstepSystems::Predict));
         app.add_systems(
@@ -924,12 +920,23 @@ fn robot_actions(
 fn robot_control(
     mut robots: ResMut<Robots>,
     ctx: Option<ResMut<RigidContext>>,
+    settings: Res<SimSettings>,
     mut errors: ResMut<SimErrors>,
 ) {
     let Some(mut ctx) = ctx else { return };
     for r in robots.robots.iter_mut() {
         let f = r.fixed.clone();
         let result = (|| {
+            if let Some(gait) = r.gait.as_mut() {
+                // The walking controller plans every substep and writes the leg targets.
+                gait.step(
+                    &f.robot,
+                    &ctx,
+                    r.base_command,
+                    settings.substep_dt(),
+                    &mut r.controller,
+                )?;
+            }
             if let Some(base) = &f.base {
                 // The base command is turned into joint velocities at the current yaw every
                 // substep; with no base action the base holds still.
@@ -943,32 +950,6 @@ fn robot_control(
             r.controller.apply(&f.robot, &mut ctx)
         })();
         if let Err(e) = result {
-            errors.raise(format!("robot \"{}\": {e}", f.name));
-        }
-    }
-}
-
-/// The walking controllers, once per physics step (they plan at the control rate and write leg
-/// joint targets; the joint controllers track them every substep).
-fn robot_gait(
-    mut robots: ResMut<Robots>,
-    ctx: Option<Res<RigidContext>>,
-    settings: Res<SimSettings>,
-    mut errors: ResMut<SimErrors>,
-) {
-    let Some(ctx) = ctx else { return };
-    for r in robots.robots.iter_mut() {
-        let Some(gait) = r.gait.as_mut() else {
-            continue;
-        };
-        let f = &r.fixed;
-        if let Err(e) = gait.step(
-            &f.robot,
-            &ctx,
-            r.base_command,
-            settings.dt,
-            &mut r.controller,
-        ) {
             errors.raise(format!("robot \"{}\": {e}", f.name));
         }
     }
