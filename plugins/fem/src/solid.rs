@@ -1393,7 +1393,15 @@ impl FemSolid {
     fn predict_constrained(&mut self, p: &Problem, stats: &mut StepStats) -> Result<(), FemError> {
         let n = self.n_nodes();
         let tol_x = self.config.newton_tolerance * self.model.length_scale;
-        let mut d = vec![Vector3::zeros(); n];
+        let has_contacts = self
+            .active
+            .iter()
+            .any(|c| matches!(c.kind, ConKind::Contact));
+        let mut d = if has_contacts {
+            vec![Vector3::zeros(); n]
+        } else {
+            Vec::new()
+        };
         let mut contact_moves = false;
         for c in &self.active {
             let i = c.node as usize;
