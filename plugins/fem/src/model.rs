@@ -34,6 +34,9 @@ pub struct SolidModel {
     pub order: Vec<u32>,
     /// Boundary nodes (corners and edge nodes of boundary faces), sorted.
     pub surface_nodes: Vec<u32>,
+    /// Nodes of each boundary face: its 3 corners (outward orientation) then the edge nodes of
+    /// edges (0,1), (1,2), (2,0); used for the surface normals at the nodes.
+    pub surface_faces: Vec<[u32; 6]>,
     /// Diagonal of the rest bounding box (m), the length scale of tolerances.
     pub length_scale: f64,
 }
@@ -93,6 +96,14 @@ impl SolidModel {
         }
         let order = pattern.rcm();
         let surface_nodes = mesh.boundary_nodes();
+        let surface_faces = mesh
+            .boundary_faces
+            .iter()
+            .map(|f| {
+                let e = |a: usize, b: usize| mesh.edge_node(f[a], f[b]).unwrap_or(f[a]);
+                [f[0], f[1], f[2], e(0, 1), e(1, 2), e(2, 0)]
+            })
+            .collect();
         let mut lo = Vector3::repeat(f64::INFINITY);
         let mut hi = Vector3::repeat(f64::NEG_INFINITY);
         for p in &mesh.rest {
@@ -115,8 +126,27 @@ impl SolidModel {
             elem_blocks,
             order,
             surface_nodes,
+            surface_faces,
             length_scale,
         })
+    }
+
+    /// Outward surface normals at the nodes for positions `x` (area-weighted sums of the normals
+    /// of the boundary faces' corner triangles, normalised), written into `out` (resized to
+    /// `n_nodes`); interior nodes, and nodes whose faces cancel out, get zero.
+    pub fn surface_normals(&self, x: &[Vector3<f64>], out: &mut Vec<Vector3<f64>>) {
+        out.clear();
+        out.resize(self.n_nodes(), Vector3::zeros());
+        for f in &self.surface_faces {
+            let [a, b, c] = [f[0], f[1], f[2]].map(|i| x[i as usize]);
+            let n = (b - a).cross(&(c - a));
+            for &i in f {
+                out[i as usize] += n;
+            }
+        }
+        for v in out.iter_mut() {
+            *v = v.try_normalize(1e-300).unwrap_or_else(Vector3::zeros);
+        }
     }
 
     /// Number of nodes.
