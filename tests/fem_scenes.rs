@@ -45,14 +45,14 @@ fn clamped_rod_sags_like_a_beam_and_is_stable_for_60_s() {
 
 #[test]
 fn dropped_torus_comes_to_rest_on_the_ground() {
-    let mut env = run("scenes/examples/torus_drop.scene.ron", 600);
+    let mut env = run("scenes/examples/torus_drop.scene.ron", 3600);
     let n = nodes(&mut env, "torus");
     let zmin = n.iter().map(|p| p.z).fold(f64::MAX, f64::min);
     let zmax = n.iter().map(|p| p.z).fold(f64::MIN, f64::max);
     let ke = env.app.world.resource::<FemContext>().bodies[0]
         .solver
         .kinetic_energy();
-    println!("after 10 s: torus z in [{zmin:.4}, {zmax:.4}] m (lying flat: [0, ~0.08]), kinetic energy {ke:.2e} J (< 1e-4)");
+    println!("after 60 s: torus z in [{zmin:.4}, {zmax:.4}] m (lying flat: [0, ~0.08]), kinetic energy {ke:.2e} J (< 1e-4)");
     assert!(zmin > -1e-3, "no penetration beyond 1 mm");
     assert!(zmax < 0.1, "lies flat");
     assert!(ke < 1e-4);
