@@ -168,6 +168,15 @@ pub fn pbd_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     Ok(out)
 }
 
+/// Base position of the first robot of an env.
+fn robot_base(env: &modesuite_engine::Env) -> Result<nalgebra::Vector3<f64>, String> {
+    let robots = env.app.world.resource::<modesuite_robots::Robots>();
+    let ctx = env.app.world.resource::<modesuite_engine::RigidContext>();
+    let r = robots.robots.first().ok_or("no robot")?;
+    let o = r.observe(ctx).map_err(|e| e.to_string())?;
+    Ok(o.base.translation.vector)
+}
+
 /// Robot cases: each robot alone on flat ground at dt 1/60 s (4 substeps) with its controller
 /// on, through the full env path. `franka`: base velocity (0.25 m/s forward) and joint-delta arm
 /// mode with a constant arm command; `spot`: walking forward at 0.5 m/s (`Locomotion`). Extra
@@ -203,12 +212,7 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         if n > 3 {
             a[3] = 0.05;
         }
-        let start = env.app.world.resource::<modesuite_robots::Robots>().robots[0]
-            .observe(env.app.world.resource::<modesuite_engine::RigidContext>())
-            .map_err(|e| e.to_string())?
-            .base
-            .translation
-            .vector;
+        let start = robot_base(&env)?;
         let steps = steps(600.0, opts);
         let t = Instant::now();
         for _ in 0..steps {
@@ -218,12 +222,7 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             }
         }
         let sps = steps as f64 / t.elapsed().as_secs_f64();
-        let end = env.app.world.resource::<modesuite_robots::Robots>().robots[0]
-            .observe(env.app.world.resource::<modesuite_engine::RigidContext>())
-            .map_err(|e| e.to_string())?
-            .base
-            .translation
-            .vector;
+        let end = robot_base(&env)?;
         let mut extra = BTreeMap::new();
         extra.insert("robot".into(), json!(case));
         extra.insert("mode".into(), json!(mode));

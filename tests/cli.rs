@@ -195,7 +195,7 @@ fn default_command_runs_the_embedded_default() {
 }
 
 #[test]
-fn bench_fem_and_pbd_json_have_their_keys() {
+fn bench_fem_pbd_and_robots_json_have_their_keys() {
     for (suite, cases, keys) in [
         (
             "fem",
@@ -211,6 +211,11 @@ fn bench_fem_and_pbd_json_have_their_keys() {
             "pbd",
             &["cloth", "cloth_selfcollide", "cloth_x16"][..],
             &["stretch_mean", "stretch_max", "particles_inside"][..],
+        ),
+        (
+            "robots",
+            &["franka", "spot"][..],
+            &["robot", "mode", "distance_m"][..],
         ),
     ] {
         let out = modesuite()

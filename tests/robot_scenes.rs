@@ -34,6 +34,18 @@ fn ee_and_base(env: &Env) -> (Vector3<f64>, Vector3<f64>, bool) {
     )
 }
 
+/// An env of an example scene, reset with seed 0.
+fn scene_env(name: &str) -> Env {
+    let path = common::root().join(format!("scenes/examples/{name}.scene.ron"));
+    let (desc, source) = modesuite::engine::scene::load_file(&path).unwrap();
+    let mut app = modesuite::cli::default_app();
+    let model = app.compile_scene(&desc, &source).unwrap();
+    app.spawn_scene(model).unwrap();
+    let mut e = Env::new(app);
+    e.reset(Some(0));
+    e
+}
+
 fn compile_err(text: &str) -> String {
     let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
     let app = modesuite::cli::default_app();
@@ -176,13 +188,7 @@ fn reset_restores_the_robot_and_runs_are_deterministic() {
 
 #[test]
 fn franka_square_scene_follows_its_script() {
-    let path = common::root().join("scenes/examples/franka_square.scene.ron");
-    let (desc, source) = modesuite::engine::scene::load_file(&path).unwrap();
-    let mut app = modesuite::cli::default_app();
-    let model = app.compile_scene(&desc, &source).unwrap();
-    app.spawn_scene(model).unwrap();
-    let mut e = Env::new(app);
-    e.reset(Some(0));
+    let mut e = scene_env("franka_square");
     let mut corners = Vec::new();
     let mut worst_ee: f64 = 0.0;
     for step in 1..=960 {
@@ -288,13 +294,7 @@ fn spot_walks_through_the_locomotion_action() {
 
 #[test]
 fn spot_figure_eight_scene_walks_both_loops() {
-    let path = common::root().join("scenes/examples/spot_figure_eight.scene.ron");
-    let (desc, source) = modesuite::engine::scene::load_file(&path).unwrap();
-    let mut app = modesuite::cli::default_app();
-    let model = app.compile_scene(&desc, &source).unwrap();
-    app.spawn_scene(model).unwrap();
-    let mut e = Env::new(app);
-    e.reset(Some(0));
+    let mut e = scene_env("spot_figure_eight");
     let (mut ymin, mut ymax, mut zmin) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY);
     let mut last = Vector3::zeros();
     for _ in 0..1885 {
