@@ -11,6 +11,7 @@ pub use modesuite_engine as engine;
 pub use modesuite_engine::prelude;
 pub use modesuite_fem as fem;
 pub use modesuite_pbd as pbd;
+pub use modesuite_render as render;
 
 pub mod benches;
 pub mod cli;
@@ -27,6 +28,7 @@ impl PluginGroup for DefaultPlugins {
         let mut p = modesuite_engine::EnginePlugins.plugins();
         p.push(Arc::new(modesuite_fem::FemPlugin));
         p.push(Arc::new(modesuite_pbd::PbdPlugin));
+        p.push(Arc::new(modesuite_render::RenderPlugin));
         p
     }
 }
