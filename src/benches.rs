@@ -11,13 +11,13 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+use bevy_ecs::world::World;
 use modesuite_engine::bench::{BenchOptions, BenchRecord};
 use modesuite_fem::bench::{
     cantilever_theory, reference_rod, run_rod_bench, RodBench, ROD_POISSON,
 };
 use modesuite_fem::{FemConfig, NoContacts};
 use modesuite_pbd::bench::{reference_scene, run_reference, BenchConfig, REFERENCE_DT};
-use bevy_ecs::world::World;
 use rayon::prelude::*;
 use serde_json::json;
 
@@ -211,18 +211,25 @@ pub fn render_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         extra.insert("triangles".into(), json!(triangles));
         BenchRecord::new(case, ips, 1, envs, extra)
     };
-    for (case, camera, base) in [("rgbd_128", "overhead", 1000.0), ("rgbd_640", "front", 150.0)] {
+    for (case, camera, base) in [
+        ("rgbd_128", "overhead", 1000.0),
+        ("rgbd_640", "front", 150.0),
+    ] {
         let (env, mut r) = render_bench_env()?;
         let cam = r.scene_camera(camera).map_err(|e| e.to_string())?.clone();
         let cams = [cam.clone()];
         let mut frame = Vec::new();
         for _ in 0..5 {
-            frame = r.render_cameras(&env.app.world, &cams).map_err(|e| e.to_string())?;
+            frame = r
+                .render_cameras(&env.app.world, &cams)
+                .map_err(|e| e.to_string())?;
         }
         let n = steps(base, opts);
         let t = Instant::now();
         for _ in 0..n {
-            frame = r.render_cameras(&env.app.world, &cams).map_err(|e| e.to_string())?;
+            frame = r
+                .render_cameras(&env.app.world, &cams)
+                .map_err(|e| e.to_string())?;
         }
         let ips = n as f64 / t.elapsed().as_secs_f64();
         let tris = r.last_triangles();
@@ -241,10 +248,8 @@ pub fn render_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         .clone();
     let cams = [cam.clone()];
     let mut batch = |envs: &mut Vec<(modesuite_engine::Env, modesuite_render::EnvRenderer)>| {
-        let mut items: Vec<(&mut modesuite_render::EnvRenderer, &World)> = envs
-            .iter_mut()
-            .map(|(e, r)| (r, &e.app.world))
-            .collect();
+        let mut items: Vec<(&mut modesuite_render::EnvRenderer, &World)> =
+            envs.iter_mut().map(|(e, r)| (r, &e.app.world)).collect();
         modesuite_render::render_batch(&mut items, &cams).map_err(|e| e.to_string())
     };
     for _ in 0..3 {
@@ -257,6 +262,14 @@ pub fn render_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     }
     let ips = (16 * n) as f64 / t.elapsed().as_secs_f64();
     let tris = envs[0].1.last_triangles();
-    out.push(record("rgbd_128_x16", ips, 16, &cam, 16 * n, &envs[0].1, tris));
+    out.push(record(
+        "rgbd_128_x16",
+        ips,
+        16,
+        &cam,
+        16 * n,
+        &envs[0].1,
+        tris,
+    ));
     Ok(out)
 }

@@ -425,10 +425,7 @@ struct Recorder {
 }
 
 impl Recorder {
-    fn new(
-        model: &std::sync::Arc<SceneModel>,
-        args: &RunArgs,
-    ) -> Result<Option<Self>, CliError> {
+    fn new(model: &std::sync::Arc<SceneModel>, args: &RunArgs) -> Result<Option<Self>, CliError> {
         if args.video.is_none() && args.frames.is_none() {
             if args.camera.is_some() {
                 return Err(CliError::input(
@@ -471,11 +468,19 @@ impl Recorder {
         }
         let cam = match (&self.camera, &self.camera_name) {
             (Some(c), _) => c.clone(),
-            (None, Some(name)) => self.renderer.scene_camera(name).map_err(render_err)?.clone(),
+            (None, Some(name)) => self
+                .renderer
+                .scene_camera(name)
+                .map_err(render_err)?
+                .clone(),
             (None, None) => {
-                let c = self
-                    .renderer
-                    .orbit_camera(world, "orbit", self.size.0, self.size.1, Orbit::default());
+                let c = self.renderer.orbit_camera(
+                    world,
+                    "orbit",
+                    self.size.0,
+                    self.size.1,
+                    Orbit::default(),
+                );
                 self.camera = Some(c.clone());
                 c
             }

@@ -14,7 +14,10 @@ fn modesuite() -> Command {
 }
 
 fn tmp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("modesuite-render-cli-{}-{name}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!(
+        "modesuite-render-cli-{}-{name}",
+        std::process::id()
+    ));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -37,7 +40,15 @@ fn run_with_video_writes_a_decodable_gif_and_png_frames() {
     let gif = dir.join("drop.gif");
     let frames = dir.join("frames");
     let out = modesuite()
-        .args(["run", "scenes/examples/drop.scene.ron", "--steps", "20", "--video-size", "96x64", "--video"])
+        .args([
+            "run",
+            "scenes/examples/drop.scene.ron",
+            "--steps",
+            "20",
+            "--video-size",
+            "96x64",
+            "--video",
+        ])
         .arg(&gif)
         .arg("--frames")
         .arg(&frames)
@@ -69,7 +80,15 @@ fn run_with_a_scene_camera_and_mp4_when_ffmpeg_exists() {
     let has_ffmpeg = modesuite::render::video::ffmpeg_available();
     let video = dir.join("tabletop.mp4");
     let out = modesuite()
-        .args(["run", "scenes/examples/tabletop_cameras.scene.ron", "--steps", "8", "--camera", "overhead", "--video"])
+        .args([
+            "run",
+            "scenes/examples/tabletop_cameras.scene.ron",
+            "--steps",
+            "8",
+            "--camera",
+            "overhead",
+            "--video",
+        ])
         .arg(&video)
         .output()
         .unwrap();
@@ -82,7 +101,17 @@ fn run_with_a_scene_camera_and_mp4_when_ffmpeg_exists() {
     }
     ok(&out);
     let probe = Command::new("ffprobe")
-        .args(["-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries", "stream=width,height,nb_read_frames", "-of", "csv=p=0"])
+        .args([
+            "-v",
+            "error",
+            "-count_frames",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=width,height,nb_read_frames",
+            "-of",
+            "csv=p=0",
+        ])
         .arg(&video)
         .output()
         .expect("ffprobe comes with ffmpeg");
@@ -94,10 +123,47 @@ fn run_with_a_scene_camera_and_mp4_when_ffmpeg_exists() {
 #[test]
 fn bad_render_arguments_exit_2_with_a_message() {
     let cases: [(&[&str], &str); 4] = [
-        (&["run", "scenes/examples/tabletop_cameras.scene.ron", "--steps", "2", "--video", "x.gif", "--camera", "nope"], "overhead"),
-        (&["run", "scenes/examples/drop.scene.ron", "--steps", "2", "--video", "x.gif", "--video-size", "12"], "WIDTHxHEIGHT"),
-        (&["run", "scenes/examples/drop.scene.ron", "--steps", "2", "--camera", "overhead"], "--video"),
-        (&["view", "scenes/examples/drop.scene.ron", "--size", "0x10"], "WIDTHxHEIGHT"),
+        (
+            &[
+                "run",
+                "scenes/examples/tabletop_cameras.scene.ron",
+                "--steps",
+                "2",
+                "--video",
+                "x.gif",
+                "--camera",
+                "nope",
+            ],
+            "overhead",
+        ),
+        (
+            &[
+                "run",
+                "scenes/examples/drop.scene.ron",
+                "--steps",
+                "2",
+                "--video",
+                "x.gif",
+                "--video-size",
+                "12",
+            ],
+            "WIDTHxHEIGHT",
+        ),
+        (
+            &[
+                "run",
+                "scenes/examples/drop.scene.ron",
+                "--steps",
+                "2",
+                "--camera",
+                "overhead",
+            ],
+            "--video",
+        ),
+        (
+            &["view", "scenes/examples/drop.scene.ron", "--size", "0x10"],
+            "WIDTHxHEIGHT",
+        ),
     ];
     for (args, want) in cases {
         let out = modesuite().args(args).output().unwrap();
@@ -107,7 +173,14 @@ fn bad_render_arguments_exit_2_with_a_message() {
         assert!(err.contains(want), "{err}");
     }
     let out = modesuite()
-        .args(["run", "scenes/examples/drop.scene.ron", "--steps", "2", "--video", "x.avi"])
+        .args([
+            "run",
+            "scenes/examples/drop.scene.ron",
+            "--steps",
+            "2",
+            "--video",
+            "x.avi",
+        ])
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(1));
@@ -158,13 +231,24 @@ fn start_xvfb() -> Display {
             continue;
         }
         let child = Command::new("Xvfb")
-            .args([name.as_str(), "-screen", "0", "1024x768x24", "-nolisten", "tcp"])
+            .args([
+                name.as_str(),
+                "-screen",
+                "0",
+                "1024x768x24",
+                "-nolisten",
+                "tcp",
+            ])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
-            .unwrap_or_else(|e| panic!("Xvfb: {e} (install the xvfb package; scripts/setup.sh does)"));
+            .unwrap_or_else(|e| {
+                panic!("Xvfb: {e} (install the xvfb package; scripts/setup.sh does)")
+            });
         let d = Display { child, name };
-        if wait_for(Duration::from_secs(20), || xdotool(&d, &["getdisplaygeometry"]).is_some()) {
+        if wait_for(Duration::from_secs(20), || {
+            xdotool(&d, &["getdisplaygeometry"]).is_some()
+        }) {
             return d;
         }
     }
@@ -176,7 +260,9 @@ fn xdotool(d: &Display, args: &[&str]) -> Option<String> {
         .args(args)
         .env("DISPLAY", &d.name)
         .output()
-        .unwrap_or_else(|e| panic!("xdotool: {e} (install the xdotool package; scripts/setup.sh does)"));
+        .unwrap_or_else(|e| {
+            panic!("xdotool: {e} (install the xdotool package; scripts/setup.sh does)")
+        });
     out.status
         .success()
         .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
@@ -200,7 +286,16 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
     let dir = tmp_dir("viewer");
     let record = dir.join("episode.json");
     let mut viewer = modesuite()
-        .args(["view", "scenes/examples/drop.scene.ron", "--size", "320x240", "--paused", "--seed", "5", "--record"])
+        .args([
+            "view",
+            "scenes/examples/drop.scene.ron",
+            "--size",
+            "320x240",
+            "--paused",
+            "--seed",
+            "5",
+            "--record",
+        ])
         .arg(&record)
         .arg("--screenshot-dir")
         .arg(&dir)
@@ -219,7 +314,10 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
     if !found {
         let _ = viewer.kill();
         let out = viewer.wait_with_output().unwrap();
-        panic!("no viewer window; stderr: {}", String::from_utf8_lossy(&out.stderr));
+        panic!(
+            "no viewer window; stderr: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
     }
     let key = |k: &str| {
         xdotool(&display, &["windowfocus", "--sync", &window]);
@@ -227,28 +325,47 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
     };
     let shot = |i: usize| dir.join(format!("modesuite-view-{i:04}.png"));
     key("p");
-    assert!(wait_for(Duration::from_secs(60), || shot(0).exists()), "first screenshot");
+    assert!(
+        wait_for(Duration::from_secs(60), || shot(0).exists()),
+        "first screenshot"
+    );
     // Orbit the camera, issue two teleoperation actions, take another screenshot.
     key("Left");
     key("Left");
     key("g");
     key("w");
     key("p");
-    assert!(wait_for(Duration::from_secs(60), || shot(1).exists()), "second screenshot");
+    assert!(
+        wait_for(Duration::from_secs(60), || shot(1).exists()),
+        "second screenshot"
+    );
     key("Escape");
-    let exited = wait_for(Duration::from_secs(60), || matches!(viewer.try_wait(), Ok(Some(_))));
+    let exited = wait_for(Duration::from_secs(60), || {
+        matches!(viewer.try_wait(), Ok(Some(_)))
+    });
     if !exited {
         let _ = viewer.kill();
     }
     let out = viewer.wait_with_output().unwrap();
-    println!("viewer: {}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    println!(
+        "viewer: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(exited && out.status.success(), "the viewer quits on escape");
     // Screenshots are written when the next frame is drawn: wait for a complete file.
     let (w0, h0, a) = read_png(&shot(0)).unwrap_or_else(|e| panic!("{e}"));
     let (_, _, b) = read_png(&shot(1)).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((w0, h0), (320, 240));
-    let diff = a.iter().zip(&b).filter(|(x, y)| (**x as i32 - **y as i32).abs() > 8).count();
-    println!("screenshots differ in {diff} of {} bytes after two orbit steps", a.len());
+    let diff = a
+        .iter()
+        .zip(&b)
+        .filter(|(x, y)| (**x as i32 - **y as i32).abs() > 8)
+        .count();
+    println!(
+        "screenshots differ in {diff} of {} bytes after two orbit steps",
+        a.len()
+    );
     assert!(diff > 1000, "the camera moved");
     let rec = modesuite::render::teleop::Recording::load(&record).unwrap_or_else(|e| panic!("{e}"));
     let names: Vec<_> = rec.episodes[0].actions.iter().map(|a| a.name).collect();

@@ -366,7 +366,14 @@ impl RenderConfig {
             .from_str(text)
             .map_err(|e| {
                 modesuite_engine::scene::plugin_params_error(&model.source, text, &path, &e)
-                    .in_file(model.source.file.as_ref().map(|f| f.display().to_string()).as_deref())
+                    .in_file(
+                        model
+                            .source
+                            .file
+                            .as_ref()
+                            .map(|f| f.display().to_string())
+                            .as_deref(),
+                    )
             })?;
         cfg.validate()?;
         for (i, c) in cfg.cameras.iter().enumerate() {
@@ -459,7 +466,11 @@ mod tests {
 
     #[test]
     fn look_at_frame_is_optical() {
-        let iso = look_at(&Vector3::new(0.0, 0.0, 2.0), &Vector3::zeros(), &Vector3::z());
+        let iso = look_at(
+            &Vector3::new(0.0, 0.0, 2.0),
+            &Vector3::zeros(),
+            &Vector3::z(),
+        );
         // Looking straight down: forward is -z.
         let fwd = iso.rotation * Vector3::z();
         assert!((fwd - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-12, "{fwd}");
@@ -473,9 +484,12 @@ mod tests {
     #[test]
     fn projection_of_the_axis_is_the_principal_point() {
         let cam = CameraDesc::looking_at("c", 64, 48, 60.0, [0.0, 0.0, 3.0], [0.0, 0.0, 0.0]);
-        let (u, v, z) = project(&cam.parent_from_camera(), cam.pinhole(), &Vector3::zeros())
-            .expect("in front");
-        assert!((u - 31.5).abs() < 1e-9 && (v - 23.5).abs() < 1e-9, "{u} {v}");
+        let (u, v, z) =
+            project(&cam.parent_from_camera(), cam.pinhole(), &Vector3::zeros()).expect("in front");
+        assert!(
+            (u - 31.5).abs() < 1e-9 && (v - 23.5).abs() < 1e-9,
+            "{u} {v}"
+        );
         assert!((z - 3.0).abs() < 1e-12);
     }
 

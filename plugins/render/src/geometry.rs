@@ -135,7 +135,11 @@ impl LocalMesh {
     /// Builds a mesh with sharp edges where neighbouring faces meet at more than `crease_deg`
     /// degrees: each triangle corner averages only the faces around its vertex within the
     /// crease angle of its own face.
-    pub fn with_creases(positions: &[Vector3<f64>], triangles: &[[u32; 3]], crease_deg: f64) -> Self {
+    pub fn with_creases(
+        positions: &[Vector3<f64>],
+        triangles: &[[u32; 3]],
+        crease_deg: f64,
+    ) -> Self {
         let cos_crease = crease_deg.to_radians().cos();
         let valid: Vec<[u32; 3]> = triangles
             .iter()
@@ -213,8 +217,12 @@ impl LocalMesh {
 
     fn append(&mut self, other: &LocalMesh, pose: &Isometry3<f64>) {
         let base = self.positions.len() as u32;
-        self.positions
-            .extend(other.positions.iter().map(|p| (pose * Point3::from(*p)).coords));
+        self.positions.extend(
+            other
+                .positions
+                .iter()
+                .map(|p| (pose * Point3::from(*p)).coords),
+        );
         self.normals
             .extend(other.normals.iter().map(|n| pose.rotation * n));
         self.triangles
@@ -253,10 +261,14 @@ pub fn tessellate(shape: TypedShape, plane_size: (f64, f64)) -> Option<LocalMesh
         TypedShape::HalfSpace(h) => {
             // The quad lies in the plane through the origin with the half space's normal.
             let n = Vector3::new(h.normal.x as f64, h.normal.y as f64, h.normal.z as f64);
-            let rot = nalgebra::UnitQuaternion::rotation_between(&Vector3::z(), &n)
-                .unwrap_or_else(|| {
-                    nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-                });
+            let rot = nalgebra::UnitQuaternion::rotation_between(&Vector3::z(), &n).unwrap_or_else(
+                || {
+                    nalgebra::UnitQuaternion::from_axis_angle(
+                        &Vector3::x_axis(),
+                        std::f64::consts::PI,
+                    )
+                },
+            );
             let mut m = LocalMesh::default();
             m.append(
                 &LocalMesh::quad(plane_size),
@@ -321,7 +333,11 @@ pub fn deformable_triangles(body: &BodyModel) -> Option<Vec<[u32; 3]>> {
         let mut tris = Vec::with_capacity(mesh.boundary_faces.len() * 4);
         for f in &mesh.boundary_faces {
             let [a, b, c] = *f;
-            match (mesh.edge_node(a, b), mesh.edge_node(b, c), mesh.edge_node(c, a)) {
+            match (
+                mesh.edge_node(a, b),
+                mesh.edge_node(b, c),
+                mesh.edge_node(c, a),
+            ) {
                 (Some(ab), Some(bc), Some(ca)) => {
                     tris.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
                 }
@@ -518,7 +534,10 @@ impl SceneExtractor {
                 };
                 let focus = out.focus;
                 for pose in frames.0.values() {
-                    let at = Isometry3::from_parts(pose.translation, nalgebra::UnitQuaternion::identity());
+                    let at = Isometry3::from_parts(
+                        pose.translation,
+                        nalgebra::UnitQuaternion::identity(),
+                    );
                     out.push_mesh(&self.marker, &at, style);
                 }
                 // Markers do not cast shadows or change the framing.

@@ -662,8 +662,18 @@ impl Targets {
         let (d, q) = (&dev.device, &dev.queue);
         let vbytes: &[u8] = bytemuck::cast_slice(&geom.vertices);
         let ibytes: &[u8] = bytemuck::cast_slice(&geom.indices);
-        grow_buffer(d, &mut self.vertices, vbytes.len() as u64, wgpu::BufferUsages::VERTEX);
-        grow_buffer(d, &mut self.indices, ibytes.len() as u64, wgpu::BufferUsages::INDEX);
+        grow_buffer(
+            d,
+            &mut self.vertices,
+            vbytes.len() as u64,
+            wgpu::BufferUsages::VERTEX,
+        );
+        grow_buffer(
+            d,
+            &mut self.indices,
+            ibytes.len() as u64,
+            wgpu::BufferUsages::INDEX,
+        );
         let (Some((vb, _)), Some((ib, _))) = (&self.vertices, &self.indices) else {
             return;
         };
@@ -847,7 +857,9 @@ impl Targets {
     /// Reads a mapped slot into a frame and unmaps it.
     pub(crate) fn read(&self, slot: usize) -> Result<CameraFrame, RenderError> {
         let t = &self.cameras[slot].1;
-        let view = t.last.ok_or_else(|| RenderError::Device("camera read before render".into()))?;
+        let view = t
+            .last
+            .ok_or_else(|| RenderError::Device("camera read before render".into()))?;
         let (w, h) = (t.width as usize, t.height as usize);
         let mut frame = CameraFrame {
             width: t.width,

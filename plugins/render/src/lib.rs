@@ -147,7 +147,9 @@ impl Plugin for RenderPlugin {
 /// render section.
 pub fn prepare(app: &mut SimApp) -> Result<(), RenderError> {
     let model = app.scene().cloned().ok_or_else(|| {
-        RenderError::Device("prepare: spawn a scene into the app before attaching a renderer".into())
+        RenderError::Device(
+            "prepare: spawn a scene into the app before attaching a renderer".into(),
+        )
     })?;
     let renderer = EnvRenderer::for_scene(model)?;
     app.insert_resource(RenderState(renderer));
@@ -175,6 +177,8 @@ fn capture_requested(world: &mut World) {
                 images.0.insert(n, f);
             }
         }
-        Err(e) => world.resource_mut::<SimErrors>().raise(format!("render: {e}")),
+        Err(e) => world
+            .resource_mut::<SimErrors>()
+            .raise(format!("render: {e}")),
     }
 }

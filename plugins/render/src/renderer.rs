@@ -27,7 +27,10 @@ pub struct EnvRenderer {
 /// The current world pose of the object named `name` (rigid body pose, else its `Pose`).
 pub fn object_pose(world: &World, name: &str) -> Option<Isometry3<f64>> {
     let mut q = world.try_query::<(Entity, &Object)>()?;
-    let entity = q.iter(world).find(|(_, o)| o.name == name).map(|(e, _)| e)?;
+    let entity = q
+        .iter(world)
+        .find(|(_, o)| o.name == name)
+        .map(|(e, _)| e)?;
     if let (Some(r), Some(ctx)) = (
         world.get::<RigidRef>(entity),
         world.get_resource::<RigidContext>(),
@@ -77,12 +80,7 @@ impl EnvRenderer {
             .camera(name)
             .ok_or_else(|| RenderError::UnknownCamera {
                 name: name.to_string(),
-                available: self
-                    .config
-                    .cameras
-                    .iter()
-                    .map(|c| c.name.clone())
-                    .collect(),
+                available: self.config.cameras.iter().map(|c| c.name.clone()).collect(),
             })
     }
 
@@ -115,12 +113,10 @@ impl EnvRenderer {
     fn view_of(&self, world: &World, cam: &CameraDesc) -> Result<ViewSetup, RenderError> {
         let parent = match &cam.attach {
             None => Isometry3::identity(),
-            Some(name) => {
-                object_pose(world, name).ok_or_else(|| RenderError::UnknownObject {
-                    camera: cam.name.clone(),
-                    object: name.clone(),
-                })?
-            }
+            Some(name) => object_pose(world, name).ok_or_else(|| RenderError::UnknownObject {
+                camera: cam.name.clone(),
+                object: name.clone(),
+            })?,
         };
         Ok(ViewSetup {
             world_from_camera: parent * cam.parent_from_camera(),
@@ -154,7 +150,11 @@ impl EnvRenderer {
     }
 
     /// Renders the named scene cameras of `world` and reads them back.
-    pub fn render(&mut self, world: &World, names: &[&str]) -> Result<Vec<CameraFrame>, RenderError> {
+    pub fn render(
+        &mut self,
+        world: &World,
+        names: &[&str],
+    ) -> Result<Vec<CameraFrame>, RenderError> {
         let cams: Vec<CameraDesc> = names
             .iter()
             .map(|n| self.scene_camera(n).cloned())
@@ -183,7 +183,9 @@ impl EnvRenderer {
         let dev = self.targets.device().clone();
         let mut encoder = dev
             .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("view") });
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("view"),
+            });
         let slots = self.encode(world, &[cam], &mut encoder, false)?;
         dev.queue.submit([encoder.finish()]);
         Ok(self.targets.color_texture(slots[0]))
@@ -282,14 +284,7 @@ impl Orbit {
         let dist = self.zoom.max(0.05) * 1.1 * radius / half.max(1e-3).atan().sin();
         let (az, el) = (self.azimuth.to_radians(), self.elevation.to_radians());
         let eye = centre + dist * Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-        let mut cam = CameraDesc::looking_at(
-            name,
-            width,
-            height,
-            fov,
-            eye.into(),
-            centre.into(),
-        );
+        let mut cam = CameraDesc::looking_at(name, width, height, fov, eye.into(), centre.into());
         cam.far = (dist + 4.0 * radius).max(100.0);
         cam
     }

@@ -241,7 +241,8 @@ mod tests {
         r.start_episode(7);
         r.record(3, TeleopAction::Grasp);
         r.set_length(10);
-        let path = std::env::temp_dir().join(format!("modesuite-teleop-{}.json", std::process::id()));
+        let path =
+            std::env::temp_dir().join(format!("modesuite-teleop-{}.json", std::process::id()));
         r.save(&path).expect("save");
         assert_eq!(Recording::load(&path).expect("load"), r);
         let _ = std::fs::remove_file(&path);

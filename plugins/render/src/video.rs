@@ -25,7 +25,10 @@ fn out_err(path: &Path, what: impl std::fmt::Display) -> RenderError {
 
 enum Sink {
     Gif(gif::Encoder<BufWriter<File>>),
-    Ffmpeg { child: Child, stdin: Option<ChildStdin> },
+    Ffmpeg {
+        child: Child,
+        stdin: Option<ChildStdin>,
+    },
 }
 
 /// Writes frames of one size into a video file chosen by its extension (`.gif` or `.mp4`).
@@ -51,11 +54,15 @@ impl VideoWriter {
         let sink = match ext.as_deref() {
             Some("gif") => {
                 if width > u16::MAX as u32 || height > u16::MAX as u32 {
-                    return Err(out_err(path, "GIF frames are at most 65535 px wide and high"));
+                    return Err(out_err(
+                        path,
+                        "GIF frames are at most 65535 px wide and high",
+                    ));
                 }
                 let file = File::create(path).map_err(|e| out_err(path, e))?;
-                let mut enc = gif::Encoder::new(BufWriter::new(file), width as u16, height as u16, &[])
-                    .map_err(|e| out_err(path, e))?;
+                let mut enc =
+                    gif::Encoder::new(BufWriter::new(file), width as u16, height as u16, &[])
+                        .map_err(|e| out_err(path, e))?;
                 enc.set_repeat(gif::Repeat::Infinite)
                     .map_err(|e| out_err(path, e))?;
                 Sink::Gif(enc)
@@ -68,7 +75,15 @@ impl VideoWriter {
                     ));
                 }
                 let mut child = Command::new("ffmpeg")
-                    .args(["-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24"])
+                    .args([
+                        "-y",
+                        "-loglevel",
+                        "error",
+                        "-f",
+                        "rawvideo",
+                        "-pix_fmt",
+                        "rgb24",
+                    ])
                     .args(["-s", &format!("{width}x{height}"), "-r", &format!("{fps}")])
                     .args(["-i", "-", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"])
                     .args(["-pix_fmt", "yuv420p", "-movflags", "+faststart"])
@@ -206,7 +221,12 @@ pub fn read_png(path: &Path) -> Result<(u32, u32, Vec<u8>), RenderError> {
             .chunks_exact(4)
             .flat_map(|p| [p[0], p[1], p[2]])
             .collect(),
-        other => return Err(out_err(path, format!("unsupported PNG colour type {other:?}"))),
+        other => {
+            return Err(out_err(
+                path,
+                format!("unsupported PNG colour type {other:?}"),
+            ))
+        }
     };
     Ok((info.width, info.height, rgb))
 }
@@ -221,7 +241,11 @@ pub fn gif_info(path: &Path) -> Result<(u32, u32, usize), RenderError> {
         .map_err(|e| out_err(path, e))?;
     let (w, h) = (dec.width() as u32, dec.height() as u32);
     let mut n = 0;
-    while dec.read_next_frame().map_err(|e| out_err(path, e))?.is_some() {
+    while dec
+        .read_next_frame()
+        .map_err(|e| out_err(path, e))?
+        .is_some()
+    {
         n += 1;
     }
     Ok((w, h, n))
@@ -235,7 +259,9 @@ mod tests {
         CameraFrame {
             width: w,
             height: h,
-            rgb: (0..w * h * 3).map(|i| (i as u8).wrapping_add(shade)).collect(),
+            rgb: (0..w * h * 3)
+                .map(|i| (i as u8).wrapping_add(shade))
+                .collect(),
             ..Default::default()
         }
     }
@@ -253,7 +279,9 @@ mod tests {
         assert_eq!(v.finish().expect("finish"), 5);
         let (w, h, n) = gif_info(&path).expect("decode");
         assert_eq!((w, h, n), (20, 10, 5), "decoded size and frame count");
-        let e = VideoWriter::create(&dir.join("t.avi"), 4, 4, 30.0).err().expect("avi");
+        let e = VideoWriter::create(&dir.join("t.avi"), 4, 4, 30.0)
+            .err()
+            .expect("avi");
         assert!(e.to_string().contains(".gif or .mp4"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }

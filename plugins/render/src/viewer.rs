@@ -116,7 +116,9 @@ struct Viewer {
 /// Opens a window on `env` (its scene spawned) and runs until the window closes or `esc`.
 pub fn run_viewer(mut env: Env, opts: ViewerOptions) -> Result<ViewerSummary, RenderError> {
     if env.app.scene().is_none() {
-        return Err(RenderError::Device("view: the env has no spawned scene".into()));
+        return Err(RenderError::Device(
+            "view: the env has no spawned scene".into(),
+        ));
     }
     let event_loop = EventLoop::new().map_err(|e| {
         RenderError::Device(format!(
@@ -183,9 +185,10 @@ impl Viewer {
                 .create_window(attrs)
                 .map_err(|e| RenderError::Device(format!("cannot create a window: {e}")))?,
         );
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(
-            Box::new(event_loop.owned_display_handle()),
-        ));
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(
+                Box::new(event_loop.owned_display_handle()),
+            ));
         let surface = instance
             .create_surface(window.clone())
             .map_err(|e| RenderError::Device(format!("window surface: {e}")))?;
@@ -309,7 +312,11 @@ impl Viewer {
     }
 
     fn advance(&mut self) {
-        let settings = *self.env.app.world.resource::<modesuite_engine::SimSettings>();
+        let settings = *self
+            .env
+            .app
+            .world
+            .resource::<modesuite_engine::SimSettings>();
         let step_dt = settings.dt * settings.decimation as f64;
         let now = Instant::now();
         let elapsed = now.duration_since(self.sim_clock).as_secs_f64();
@@ -427,18 +434,20 @@ impl Viewer {
                 .renderer
                 .render_cameras(&self.env.app.world, std::slice::from_ref(&cam))?;
             if let Some(f) = frames.first() {
-                let path = self
-                    .opts
-                    .screenshot_dir
-                    .join(format!("modesuite-view-{:04}.png", self.summary.screenshots.len()));
+                let path = self.opts.screenshot_dir.join(format!(
+                    "modesuite-view-{:04}.png",
+                    self.summary.screenshots.len()
+                ));
                 crate::video::write_frame_png(&path, f)?;
                 self.summary.screenshots.push(path);
             }
         }
         let surface_tex = match gpu.surface.get_current_texture() {
-            wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
+            wgpu::CurrentSurfaceTexture::Success(t)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
-                gpu.surface.configure(&gpu.renderer.device().device, &gpu.config);
+                gpu.surface
+                    .configure(&gpu.renderer.device().device, &gpu.config);
                 return Ok(());
             }
             _ => return Ok(()),
@@ -463,7 +472,9 @@ impl Viewer {
         let target = surface_tex.texture.create_view(&Default::default());
         let mut encoder = dev
             .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("blit") });
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("blit"),
+            });
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("blit"),
