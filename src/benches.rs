@@ -247,7 +247,7 @@ pub fn render_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         .map_err(|e| e.to_string())?
         .clone();
     let cams = [cam.clone()];
-    let mut batch = |envs: &mut Vec<(modesuite_engine::Env, modesuite_render::EnvRenderer)>| {
+    let batch = |envs: &mut Vec<(modesuite_engine::Env, modesuite_render::EnvRenderer)>| {
         let mut items: Vec<(&mut modesuite_render::EnvRenderer, &World)> =
             envs.iter_mut().map(|(e, r)| (r, &e.app.world)).collect();
         modesuite_render::render_batch(&mut items, &cams).map_err(|e| e.to_string())
