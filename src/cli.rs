@@ -463,7 +463,7 @@ impl Recorder {
 
     /// Renders and writes the current frame when `step` is on the recording stride.
     fn capture(&mut self, world: &World, step: u64) -> Result<(), CliError> {
-        if step % self.every != 0 {
+        if !step.is_multiple_of(self.every) {
             return Ok(());
         }
         let cam = match (&self.camera, &self.camera_name) {

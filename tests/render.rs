@@ -324,8 +324,12 @@ fn batched_envs_share_one_device_and_match_single_renders() {
     }
     assert!(std::sync::Arc::ptr_eq(r1.device(), r2.device()));
     let cam = r1.scene_camera("cam").unwrap().clone();
-    let single1 = r1.render_cameras(&e1.app.world, &[cam.clone()]).unwrap();
-    let single2 = r2.render_cameras(&e2.app.world, &[cam.clone()]).unwrap();
+    let single1 = r1
+        .render_cameras(&e1.app.world, std::slice::from_ref(&cam))
+        .unwrap();
+    let single2 = r2
+        .render_cameras(&e2.app.world, std::slice::from_ref(&cam))
+        .unwrap();
     let batch = render_batch(
         &mut [(&mut r1, &e1.app.world), (&mut r2, &e2.app.world)],
         &[cam],
@@ -381,7 +385,7 @@ fn markers_are_translucent_and_only_in_colour() {
 
 #[test]
 fn scene_cameras_are_validated_with_located_errors() {
-    let mut app = modesuite::cli::default_app();
+    let app = modesuite::cli::default_app();
     let bad = r#"Scene(objects: [(name: "ground", shape: Plane(size: (1.0, 1.0)), body: Static)],
         extensions: {"render": (cameras: [(name: "c", width: 16, height: 16, attach: "nobody")])})"#;
     let desc = scene::parse_str(bad, "<test>").unwrap();

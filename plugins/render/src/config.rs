@@ -11,7 +11,7 @@
 //!              intrinsics: Pinhole(fx: 50.0, fy: 50.0, cx: 31.5, cy: 23.5),
 //!              attach: "box", pose: (pos: (0.0, 0.0, 0.2)), look_at: (0.0, 0.0, 0.0)),
 //!         ],
-//!         light: (direction: (-0.4, -0.3, -1.0), shadow_map: 1024),
+//!         light: (direction: (-0.4, -0.3, -1.0), shadow_map: 512),
 //!     ),
 //! }
 //! ```
@@ -33,9 +33,6 @@ fn default_near() -> f64 {
 }
 fn default_far() -> f64 {
     100.0
-}
-fn default_shadow_map() -> u32 {
-    1024
 }
 fn default_direction() -> [f64; 3] {
     [-0.4, -0.3, -1.0]
@@ -89,9 +86,10 @@ pub struct LightDesc {
     /// Ambient fraction of the light in [0, 1].
     #[serde(default = "default_ambient")]
     pub ambient: f32,
-    /// Shadow map resolution in texels (0 = no shadows).
-    #[serde(default = "default_shadow_map")]
-    pub shadow_map: u32,
+    /// Shadow map resolution in texels (0 = no shadows; default: the largest side of the cameras
+    /// rendered together, rounded up to a power of two in 256..=2048).
+    #[serde(default)]
+    pub shadow_map: Option<u32>,
 }
 
 impl Default for LightDesc {
@@ -99,7 +97,7 @@ impl Default for LightDesc {
         Self {
             direction: default_direction(),
             ambient: default_ambient(),
-            shadow_map: default_shadow_map(),
+            shadow_map: None,
         }
     }
 }
@@ -258,9 +256,8 @@ impl CameraDesc {
                 }
             }
             Intrinsics::Pinhole { fx, fy, cx, cy } => {
-                if !(fx.is_finite() && fy.is_finite() && fx > 0.0 && fy > 0.0)
-                    || !(cx.is_finite() && cy.is_finite())
-                {
+                let finite = [fx, fy, cx, cy].iter().all(|x| x.is_finite());
+                if !(finite && fx > 0.0 && fy > 0.0) {
                     return bad(
                         "intrinsics",
                         format!("Pinhole(fx: {fx}, fy: {fy}, cx: {cx}, cy: {cy})"),
@@ -426,10 +423,10 @@ impl RenderConfig {
                 "a number in [0, 1]",
             ));
         }
-        if self.light.shadow_map > 8192 {
+        if let Some(n) = self.light.shadow_map.filter(|n| *n > 8192) {
             return Err(SceneError::semantic(
                 format!("{path}.light.shadow_map"),
-                self.light.shadow_map.to_string(),
+                n.to_string(),
                 "a resolution in 0..=8192 texels (0 = no shadows)",
             ));
         }

@@ -90,12 +90,25 @@ impl RenderDevice {
         static SHARED: OnceLock<Result<Arc<RenderDevice>, String>> = OnceLock::new();
         SHARED
             .get_or_init(|| {
-                let instance = wgpu::Instance::new(
-                    wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
-                );
-                RenderDevice::new(instance, None)
-                    .map(Arc::new)
-                    .map_err(|e| e.to_string())
+                // Vulkan first (GPU drivers or lavapipe); GL (llvmpipe) only when Vulkan has no
+                // adapter, which also keeps GL's EGL probing quiet. WGPU_BACKEND overrides.
+                let from_env = wgpu::Backends::from_env();
+                let order = match from_env {
+                    Some(b) => vec![b],
+                    None => vec![wgpu::Backends::VULKAN, wgpu::Backends::GL],
+                };
+                let mut last = String::new();
+                for backends in order {
+                    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+                        backends,
+                        ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
+                    });
+                    match RenderDevice::new(instance, None) {
+                        Ok(d) => return Ok(Arc::new(d)),
+                        Err(e) => last = e.to_string(),
+                    }
+                }
+                Err(last)
             })
             .clone()
             .map_err(RenderError::NoAdapter)
@@ -417,7 +430,8 @@ pub(crate) struct CameraTarget {
     data_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     uniform: wgpu::Buffer,
-    bind: wgpu::BindGroup,
+    /// Bind group and the shadow-map generation it was made for.
+    bind: (u64, wgpu::BindGroup),
     readback: wgpu::Buffer,
     color_row: u32,
     data_row: u32,
@@ -439,6 +453,8 @@ pub struct Targets {
     vertices: Option<(wgpu::Buffer, u64)>,
     indices: Option<(wgpu::Buffer, u64)>,
     shadow: ShadowMap,
+    /// Bumped whenever the shadow map is replaced.
+    generation: u64,
     pub(crate) cameras: Vec<(String, CameraTarget)>,
     background: [f32; 3],
     light: LightDesc,
@@ -489,11 +505,9 @@ fn grow_buffer(
     ));
 }
 
-impl Targets {
-    /// GPU state for one env: shadow map of `light.shadow_map` texels (1 when off).
-    pub fn new(device: Arc<RenderDevice>, light: &LightDesc, background: [f32; 3]) -> Self {
+impl ShadowMap {
+    fn new(device: &RenderDevice, size: u32) -> Self {
         let d = &device.device;
-        let size = light.shadow_map.max(1);
         let tex = texture(
             d,
             "shadow map",
@@ -502,7 +516,6 @@ impl Targets {
             DEPTH_FORMAT,
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
         );
-        let view = tex.create_view(&Default::default());
         let uniform = d.create_buffer(&wgpu::BufferDescriptor {
             label: Some("shadow view"),
             size: std::mem::size_of::<ViewUniform>() as u64,
@@ -518,12 +531,27 @@ impl Targets {
             }],
         });
         Self {
-            shadow: ShadowMap {
-                size,
-                view,
-                uniform,
-                bind,
-            },
+            size,
+            view: tex.create_view(&Default::default()),
+            uniform,
+            bind,
+        }
+    }
+}
+
+/// The shadow-map resolution for cameras whose largest side is `side` px: the next power of
+/// two, in 256..=2048 (shadow texels cost as much as camera pixels on a software rasteriser).
+pub fn auto_shadow_map(side: u32) -> u32 {
+    side.next_power_of_two().clamp(256, 2048)
+}
+
+impl Targets {
+    /// GPU state for one env (the shadow map is sized on first use).
+    pub fn new(device: Arc<RenderDevice>, light: &LightDesc, background: [f32; 3]) -> Self {
+        let shadow = ShadowMap::new(&device, 1);
+        Self {
+            shadow,
+            generation: 0,
             device,
             vertices: None,
             indices: None,
@@ -531,6 +559,46 @@ impl Targets {
             background,
             light: light.clone(),
         }
+    }
+
+    /// Resizes the shadow map for this frame's views (camera bind groups follow).
+    fn fit_shadow_map(&mut self, views: &[(usize, ViewSetup)]) {
+        let side = views
+            .iter()
+            .map(|(_, v)| v.width.max(v.height))
+            .max()
+            .unwrap_or(1);
+        let size = match self.light.shadow_map {
+            Some(0) => 1,
+            Some(n) => n,
+            None => auto_shadow_map(side),
+        };
+        if size != self.shadow.size {
+            self.shadow = ShadowMap::new(&self.device, size);
+            self.generation += 1;
+        }
+    }
+
+    fn camera_bind(&self, uniform: &wgpu::Buffer) -> wgpu::BindGroup {
+        let dev = &self.device;
+        dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("camera view"),
+            layout: &dev.pipelines.view_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&self.shadow.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&dev.pipelines.compare_sampler),
+                },
+            ],
+        })
     }
 
     /// The device these targets live on.
@@ -574,24 +642,7 @@ impl Targets {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let bind = d.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("camera view"),
-            layout: &dev.pipelines.view_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&self.shadow.view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&dev.pipelines.compare_sampler),
-                },
-            ],
-        });
+        let bind = (self.generation, self.camera_bind(&uniform));
         let color_row = align(width * 4, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let data_row = align(width * 8, wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let data_offset = align(color_row * height, 256) as u64;
@@ -658,6 +709,13 @@ impl Targets {
         views: &[(usize, ViewSetup)],
         readback: bool,
     ) {
+        self.fit_shadow_map(views);
+        for (slot, _) in views {
+            if self.cameras[*slot].1.bind.0 != self.generation {
+                let bind = self.camera_bind(&self.cameras[*slot].1.uniform);
+                self.cameras[*slot].1.bind = (self.generation, bind);
+            }
+        }
         let dev = self.device.clone();
         let (d, q) = (&dev.device, &dev.queue);
         let vbytes: &[u8] = bytemuck::cast_slice(&geom.vertices);
@@ -683,7 +741,7 @@ impl Targets {
         if !ibytes.is_empty() {
             q.write_buffer(ib, 0, ibytes);
         }
-        let shadows = self.light.shadow_map > 0;
+        let shadows = self.shadow.size > 1;
         let (light_vp, r) = self.light_view_proj(geom);
         let texel_world = 2.0 * r / self.shadow.size as f64;
         let light_dir = Vector3::from(self.light.direction).normalize();
@@ -782,7 +840,7 @@ impl Targets {
                 });
                 if !opaque.is_empty() {
                     pass.set_pipeline(&dev.pipelines.opaque);
-                    pass.set_bind_group(0, &t.bind, &[]);
+                    pass.set_bind_group(0, &t.bind.1, &[]);
                     pass.set_vertex_buffer(0, vb.slice(..));
                     pass.set_index_buffer(ib.slice(..), wgpu::IndexFormat::Uint32);
                     pass.draw_indexed(opaque.clone(), 0, 0..1);
@@ -811,7 +869,7 @@ impl Targets {
                     ..Default::default()
                 });
                 pass.set_pipeline(&dev.pipelines.markers);
-                pass.set_bind_group(0, &t.bind, &[]);
+                pass.set_bind_group(0, &t.bind.1, &[]);
                 pass.set_vertex_buffer(0, vb.slice(..));
                 pass.set_index_buffer(ib.slice(..), wgpu::IndexFormat::Uint32);
                 pass.draw_indexed(marker_range.clone(), 0, 0..1);

@@ -576,15 +576,15 @@ impl ApplicationHandler for Viewer {
                     g.surface.configure(&g.renderer.device().device, &g.config);
                 }
             }
-            WindowEvent::KeyboardInput { event, .. } => {
-                if event.state == ElementState::Pressed {
-                    self.key(&event.logical_key, event_loop);
-                }
+            WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
+                self.key(&event.logical_key, event_loop);
             }
-            WindowEvent::MouseInput { state, button, .. } => {
-                if button == MouseButton::Left {
-                    self.drag = (state == ElementState::Pressed).then_some(self.cursor);
-                }
+            WindowEvent::MouseInput {
+                state,
+                button: MouseButton::Left,
+                ..
+            } => {
+                self.drag = (state == ElementState::Pressed).then_some(self.cursor);
             }
             WindowEvent::CursorMoved { position, .. } => {
                 self.cursor = (position.x, position.y);
