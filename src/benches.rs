@@ -1,4 +1,4 @@
-//! The `modesuite bench fem` and `bench pbd` suites: the deformable solvers on the reference rod
+//! The `modesuite bench fem`, `bench pbd` and `bench render` suites: the deformable solvers on the reference rod
 //! and the reference sheet (../shared/bench defines both), one thread, and 16 copies on one
 //! thread and on all threads.
 //!
@@ -11,6 +11,7 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+use bevy_ecs::world::World;
 use modesuite_engine::bench::{BenchOptions, BenchRecord};
 use modesuite_fem::bench::{
     cantilever_theory, reference_rod, run_rod_bench, RodBench, ROD_POISSON,
@@ -229,5 +230,110 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         extra.insert("distance_m".into(), json!((end - start).xy().norm()));
         out.push(BenchRecord::new(case, sps, 1, 1, extra));
     }
+    Ok(out)
+}
+
+/// The scene of the render suite (embedded, so the suite runs from any folder).
+pub const RENDER_BENCH_SCENE: &str = include_str!("../scenes/examples/tabletop_cameras.scene.ron");
+
+/// A spawned, reset env of the render bench scene with its renderer (shared device).
+fn render_bench_env() -> Result<(modesuite_engine::Env, modesuite_render::EnvRenderer), String> {
+    let desc = modesuite_engine::scene::parse_str(RENDER_BENCH_SCENE, "tabletop_cameras.scene.ron")
+        .map_err(|e| e.to_string())?;
+    let mut app = crate::cli::default_app();
+    let model = app
+        .compile_scene(&desc, &modesuite_engine::SceneSource::in_memory("."))
+        .map_err(|e| e.to_string())?;
+    app.spawn_scene(model.clone()).map_err(|e| e.to_string())?;
+    let renderer = modesuite_render::EnvRenderer::for_scene(model).map_err(|e| e.to_string())?;
+    let mut env = modesuite_engine::Env::new(app);
+    env.reset(Some(0));
+    Ok((env, renderer))
+}
+
+/// Render cases on the tabletop scene (cloth, FEM rod, rigid bodies, shadows), rendering and
+/// reading back RGB + depth + segmentation of a static world (physics not stepped):
+/// `rgbd_128` (the 128 x 128 overhead camera), `rgbd_640` (the 640 x 480 front camera),
+/// `rgbd_128_x16` (16 envs, one 128 x 128 camera each, batched into one submission).
+/// `steps_per_s` is images per second. Extra keys: `width`, `height`, `images`, `adapter`,
+/// `software` (a CPU rasteriser), `triangles`.
+pub fn render_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
+    let mut out = Vec::new();
+    let record = |case: &str,
+                  ips: f64,
+                  envs: usize,
+                  cam: &modesuite_render::CameraDesc,
+                  images: usize,
+                  r: &modesuite_render::EnvRenderer,
+                  triangles: usize| {
+        let mut extra = BTreeMap::new();
+        extra.insert("width".into(), json!(cam.width));
+        extra.insert("height".into(), json!(cam.height));
+        extra.insert("images".into(), json!(images));
+        extra.insert("adapter".into(), json!(r.device().adapter_name()));
+        extra.insert("software".into(), json!(r.device().is_software()));
+        extra.insert("triangles".into(), json!(triangles));
+        BenchRecord::new(case, ips, 1, envs, extra)
+    };
+    for (case, camera, base) in [
+        ("rgbd_128", "overhead", 1000.0),
+        ("rgbd_640", "front", 150.0),
+    ] {
+        let (env, mut r) = render_bench_env()?;
+        let cam = r.scene_camera(camera).map_err(|e| e.to_string())?.clone();
+        let cams = [cam.clone()];
+        let mut frame = Vec::new();
+        for _ in 0..5 {
+            frame = r
+                .render_cameras(&env.app.world, &cams)
+                .map_err(|e| e.to_string())?;
+        }
+        let n = steps(base, opts);
+        let t = Instant::now();
+        for _ in 0..n {
+            frame = r
+                .render_cameras(&env.app.world, &cams)
+                .map_err(|e| e.to_string())?;
+        }
+        let ips = n as f64 / t.elapsed().as_secs_f64();
+        let tris = r.last_triangles();
+        if frame.first().is_none_or(|f| f.rgb.is_empty()) {
+            return Err(format!("{case}: no image rendered"));
+        }
+        out.push(record(case, ips, 1, &cam, n, &r, tris));
+    }
+    let mut envs = (0..16)
+        .map(|_| render_bench_env())
+        .collect::<Result<Vec<_>, _>>()?;
+    let cam = envs[0]
+        .1
+        .scene_camera("overhead")
+        .map_err(|e| e.to_string())?
+        .clone();
+    let cams = [cam.clone()];
+    let batch = |envs: &mut Vec<(modesuite_engine::Env, modesuite_render::EnvRenderer)>| {
+        let mut items: Vec<(&mut modesuite_render::EnvRenderer, &World)> =
+            envs.iter_mut().map(|(e, r)| (r, &e.app.world)).collect();
+        modesuite_render::render_batch(&mut items, &cams).map_err(|e| e.to_string())
+    };
+    for _ in 0..3 {
+        batch(&mut envs)?;
+    }
+    let n = steps(100.0, opts);
+    let t = Instant::now();
+    for _ in 0..n {
+        batch(&mut envs)?;
+    }
+    let ips = (16 * n) as f64 / t.elapsed().as_secs_f64();
+    let tris = envs[0].1.last_triangles();
+    out.push(record(
+        "rgbd_128_x16",
+        ips,
+        16,
+        &cam,
+        16 * n,
+        &envs[0].1,
+        tris,
+    ));
     Ok(out)
 }

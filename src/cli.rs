@@ -6,8 +6,12 @@
 //!   last step; `--json` prints one JSON object per episode (`episode`, `seed`, `return`, `length`,
 //!   `success`, `error`, `wall_s`, `steps_per_s`) and a final summary object (`summary: true`,
 //!   `episodes`, `success_rate`, `mean_return`, `mean_length`, `errors`, `env_steps_per_s`).
+//!   `--video FILE.gif|FILE.mp4` records the episodes (MP4 needs ffmpeg) and `--frames DIR` writes
+//!   PNG frames, from `--camera NAME` (a camera of the scene's render section) or a default orbit
+//!   camera framing the scene; recording never changes the simulation.
 //! - `modesuite bench NAME [--json]`: with `--json`, one JSON object per line per case with at
-//!   least `case`, `steps_per_s`, `threads`, `envs`.
+//!   least `case`, `steps_per_s`, `threads`, `envs` (for `bench render`, images per second).
+//! - `modesuite view SCENE_OR_TASK [--seed S] [--record FILE.json]`: the interactive viewer.
 //! - `--plugin PATH` (repeatable) on `run`, `validate` and `list` loads a compiled plugin (C ABI,
 //!   see `modesuite_engine::dynamic`); nothing is ever loaded because a scene names it.
 
@@ -23,6 +27,8 @@ use modesuite_engine::bench::{BenchOptions, BenchRecord};
 use modesuite_engine::prelude::*;
 use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
+use modesuite_render::video::{write_frame_png, VideoWriter};
+use modesuite_render::{CameraDesc, EnvRenderer, Orbit, RenderConfig, RenderError};
 
 /// Command-line arguments.
 #[derive(Parser, Debug)]
@@ -60,7 +66,9 @@ pub enum Command {
     },
     /// Run a scene file or a task id and report per-episode metrics.
     Run(RunArgs),
-    /// Run a benchmark suite: engine, fem, pbd (more suites arrive with their plugins).
+    /// Open the interactive viewer (orbit camera, pause/step/reset, keyboard teleoperation).
+    View(ViewArgs),
+    /// Run a benchmark suite: engine, fem, pbd, render (more suites arrive with their plugins).
     Bench {
         /// Suite name.
         name: String,
@@ -99,6 +107,40 @@ pub struct RunArgs {
     /// Load a compiled plugin (C ABI) before reading the scene; repeatable.
     #[arg(long)]
     pub plugin: Vec<PathBuf>,
+    /// Record a video of the run: `.gif` (built in) or `.mp4` (needs ffmpeg).
+    #[arg(long)]
+    pub video: Option<PathBuf>,
+    /// Write every recorded frame as a PNG into this folder.
+    #[arg(long)]
+    pub frames: Option<PathBuf>,
+    /// Record from this camera of the scene's render section (default: an orbit camera).
+    #[arg(long)]
+    pub camera: Option<String>,
+    /// Size of the default orbit camera, WIDTHxHEIGHT.
+    #[arg(long, default_value = "480x320")]
+    pub video_size: String,
+}
+
+/// Arguments of `view`.
+#[derive(clap::Args, Debug)]
+pub struct ViewArgs {
+    /// A `*.scene.ron` file or a task id.
+    pub target: String,
+    /// Seed of the first episode (each reset uses the next).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Write the teleoperation recording (seed + actions, JSON) here on exit.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Folder for screenshots (key `p`).
+    #[arg(long, default_value = ".")]
+    pub screenshot_dir: PathBuf,
+    /// Window size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "960x640")]
+    pub size: String,
+    /// Start paused.
+    #[arg(long)]
+    pub paused: bool,
 }
 
 /// A CLI failure: the message and the exit code (2 = bad input, 1 = runtime failure).
@@ -175,6 +217,7 @@ pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
         Some(Command::List { what, plugin }) => list(what.as_deref(), &load_plugins(&plugin)?, out),
         Some(Command::Validate { files, plugin }) => validate(&files, &load_plugins(&plugin)?, out),
         Some(Command::Run(args)) => run(&args, out),
+        Some(Command::View(args)) => view(&args, out),
         Some(Command::Bench {
             name,
             json,
@@ -205,6 +248,10 @@ fn run_default(out: &mut dyn Write) -> Result<(), CliError> {
         dump_state: None,
         json: false,
         plugin: Vec::new(),
+        video: None,
+        frames: None,
+        camera: None,
+        video_size: "480x320".into(),
     };
     run_scene(&desc, &source, &args, &[], out)
 }
@@ -364,6 +411,7 @@ fn validate(
 ) -> Result<(), CliError> {
     for f in files {
         let (model, _) = compile_file(f, plugins)?;
+        RenderConfig::from_scene(&model)?;
         writeln!(
             out,
             "{}: ok ({} objects, dt {} s x {} substeps, decimation {})",
@@ -378,24 +426,209 @@ fn validate(
     Ok(())
 }
 
-fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let plugins = load_plugins(&args.plugin)?;
-    let path = Path::new(&args.target);
+/// Loads a scene file named on the command line (task ids are not available yet).
+fn load_target(target: &str) -> Result<(SceneDesc, SceneSource), CliError> {
+    let path = Path::new(target);
     if path.is_file() {
-        let (desc, source) = scene::load_file(path)?;
-        return run_scene(&desc, &source, args, &plugins, out);
+        return Ok(scene::load_file(path)?);
     }
-    if args.target.starts_with("MoDe-") {
+    if target.starts_with("MoDe-") {
         return Err(CliError::input(format!(
-            "{}: the MoDeSuite task environments are not implemented yet (they arrive with the tasks plugin); run a scene file instead, e.g. {}",
-            args.target,
+            "{target}: the MoDeSuite task environments are not implemented yet (they arrive with the tasks plugin); run a scene file instead, e.g. {}",
             crate::DEFAULT_SCENE_NAME
         )));
     }
     Err(CliError::input(format!(
-        "{}: no such scene file, and not a task id (MoDe-<Robot>-<Task>-v0)",
-        args.target
+        "{target}: no such scene file, and not a task id (MoDe-<Robot>-<Task>-v0)"
     )))
+}
+
+fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let plugins = load_plugins(&args.plugin)?;
+    let (desc, source) = load_target(&args.target)?;
+    run_scene(&desc, &source, args, &plugins, out)
+}
+
+/// Parses `WIDTHxHEIGHT`.
+fn parse_size(flag: &str, s: &str) -> Result<(u32, u32), CliError> {
+    let bad = || {
+        CliError::input(format!(
+            "{flag} = {s:?}: WIDTHxHEIGHT in pixels, each in 1..=8192, e.g. 480x320"
+        ))
+    };
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let w: u32 = w.trim().parse().map_err(|_| bad())?;
+    let h: u32 = h.trim().parse().map_err(|_| bad())?;
+    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+fn render_err(e: RenderError) -> CliError {
+    match e {
+        RenderError::Scene(e) => CliError::input(e.to_string()),
+        RenderError::UnknownCamera { .. } => CliError::input(e.to_string()),
+        other => CliError::runtime(other.to_string()),
+    }
+}
+
+/// Records frames of a run into a video and/or PNG files.
+struct Recorder {
+    renderer: EnvRenderer,
+    camera: Option<CameraDesc>,
+    camera_name: Option<String>,
+    size: (u32, u32),
+    video_path: Option<PathBuf>,
+    video: Option<VideoWriter>,
+    frames_dir: Option<PathBuf>,
+    every: u64,
+    fps: f64,
+    written: u64,
+}
+
+impl Recorder {
+    fn new(model: &std::sync::Arc<SceneModel>, args: &RunArgs) -> Result<Option<Self>, CliError> {
+        if args.video.is_none() && args.frames.is_none() {
+            if args.camera.is_some() {
+                return Err(CliError::input(
+                    "--camera: only used with --video or --frames",
+                ));
+            }
+            return Ok(None);
+        }
+        let size = parse_size("--video-size", &args.video_size)?;
+        if let Some(dir) = &args.frames {
+            std::fs::create_dir_all(dir).map_err(|e| {
+                CliError::runtime(format!("--frames {}: cannot create: {e}", dir.display()))
+            })?;
+        }
+        let renderer = EnvRenderer::for_scene(model.clone()).map_err(render_err)?;
+        if let Some(name) = &args.camera {
+            renderer.scene_camera(name).map_err(render_err)?;
+        }
+        // About 30 frames per second of simulated time.
+        let step_dt = model.settings.dt * model.settings.decimation as f64;
+        let every = ((1.0 / (30.0 * step_dt)).round() as u64).max(1);
+        Ok(Some(Self {
+            renderer,
+            camera: None,
+            camera_name: args.camera.clone(),
+            size,
+            video_path: args.video.clone(),
+            video: None,
+            frames_dir: args.frames.clone(),
+            every,
+            fps: 1.0 / (every as f64 * step_dt),
+            written: 0,
+        }))
+    }
+
+    /// Renders and writes the current frame when `step` is on the recording stride.
+    fn capture(&mut self, world: &World, step: u64) -> Result<(), CliError> {
+        if !step.is_multiple_of(self.every) {
+            return Ok(());
+        }
+        let cam = match (&self.camera, &self.camera_name) {
+            (Some(c), _) => c.clone(),
+            (None, Some(name)) => self
+                .renderer
+                .scene_camera(name)
+                .map_err(render_err)?
+                .clone(),
+            (None, None) => {
+                let c = self.renderer.orbit_camera(
+                    world,
+                    "orbit",
+                    self.size.0,
+                    self.size.1,
+                    Orbit::default(),
+                );
+                self.camera = Some(c.clone());
+                c
+            }
+        };
+        let frames = self
+            .renderer
+            .render_cameras(world, std::slice::from_ref(&cam))
+            .map_err(render_err)?;
+        let Some(frame) = frames.first() else {
+            return Ok(());
+        };
+        if let Some(dir) = &self.frames_dir {
+            let path = dir.join(format!("frame_{:05}.png", self.written));
+            write_frame_png(&path, frame).map_err(render_err)?;
+        }
+        if let Some(path) = &self.video_path {
+            if self.video.is_none() {
+                self.video = Some(
+                    VideoWriter::create(path, frame.width, frame.height, self.fps)
+                        .map_err(render_err)?,
+                );
+            }
+            if let Some(v) = self.video.as_mut() {
+                v.push(frame).map_err(render_err)?;
+            }
+        }
+        self.written += 1;
+        Ok(())
+    }
+
+    fn finish(self, out: &mut dyn Write, quiet: bool) -> Result<(), CliError> {
+        let frames = match self.video {
+            Some(v) => v.finish().map_err(render_err)?,
+            None => self.written as usize,
+        };
+        if !quiet {
+            let mut what = Vec::new();
+            if let Some(p) = &self.video_path {
+                what.push(format!("video {}", p.display()));
+            }
+            if let Some(d) = &self.frames_dir {
+                what.push(format!("PNG frames in {}", d.display()));
+            }
+            writeln!(
+                out,
+                "recorded {frames} frames at {:.1} fps ({}; {})",
+                self.fps,
+                what.join(", "),
+                self.renderer.device().adapter_name()
+            )
+            .map_err(io)?;
+        }
+        Ok(())
+    }
+}
+
+fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let size = parse_size("--size", &args.size)?;
+    let (desc, source) = load_target(&args.target)?;
+    let mut app = default_app();
+    let model = app.compile_scene(&desc, &source)?;
+    RenderConfig::from_scene(&model)?;
+    app.spawn_scene(model)?;
+    let env = Env::new(app);
+    let opts = modesuite_render::viewer::ViewerOptions {
+        label: args.target.clone(),
+        seed: args.seed,
+        record: args.record.clone(),
+        screenshot_dir: args.screenshot_dir.clone(),
+        size,
+        paused: args.paused,
+    };
+    let summary = modesuite_render::viewer::run_viewer(env, opts).map_err(render_err)?;
+    writeln!(
+        out,
+        "viewer closed: {} env steps, {} frames, {} teleoperation actions, {} screenshots{}",
+        summary.steps,
+        summary.frames,
+        summary.actions,
+        summary.screenshots.len(),
+        args.record
+            .as_ref()
+            .map_or(String::new(), |p| format!(", recording {}", p.display()))
+    )
+    .map_err(io)
 }
 
 /// A one-line progress bar on stderr when it is a terminal.
@@ -452,6 +685,8 @@ fn run_scene(
     if args.episodes == 0 {
         return Err(CliError::input("--episodes = 0: must be at least 1"));
     }
+    RenderConfig::from_scene(&model)?;
+    let mut recorder = Recorder::new(&model, args)?;
     app.spawn_scene(model)?;
     let mut env = Env::new(app);
     // The CLI resets between episodes itself, so the final state stays for --dump-state.
@@ -476,6 +711,9 @@ fn run_scene(
     for ep in 0..args.episodes {
         let seed = args.seed.wrapping_add(ep);
         env.reset(Some(seed));
+        if let Some(r) = recorder.as_mut() {
+            r.capture(&env.app.world, 0)?;
+        }
         let t = Instant::now();
         let mut ret = 0.0;
         let mut length = 0;
@@ -485,6 +723,9 @@ fn run_scene(
             let o = env.step(&zero);
             ret += o.reward;
             length = i + 1;
+            if let Some(r) = recorder.as_mut() {
+                r.capture(&env.app.world, length)?;
+            }
             progress.update(ep * steps + i + 1);
             if o.terminated || o.truncated {
                 success = o.info.success;
@@ -535,6 +776,9 @@ fn run_scene(
         }
     }
     progress.finish();
+    if let Some(r) = recorder {
+        r.finish(out, args.json)?;
+    }
     let n = args.episodes as f64;
     let mean_return = returns.iter().sum::<f64>() / n;
     let mean_length = lengths.iter().sum::<u64>() as f64 / n;
@@ -604,14 +848,15 @@ fn bench(
         "fem" => crate::benches::fem_cases(&opts).map_err(CliError::runtime)?,
         "pbd" => crate::benches::pbd_cases(&opts).map_err(CliError::runtime)?,
         "robots" => crate::benches::robots_cases(&opts).map_err(CliError::runtime)?,
-        "render" | "tasks" => {
+        "render" => crate::benches::render_cases(&opts).map_err(CliError::runtime)?,
+        "tasks" => {
             return Err(CliError::input(format!(
-                "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine, fem, pbd, robots"
+                "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine, fem, pbd, robots, render"
             )))
         }
         other => {
             return Err(CliError::input(format!(
-                "bench {other}: unknown suite; available: engine, fem, pbd, robots"
+                "bench {other}: unknown suite; available: engine, fem, pbd, robots, render"
             )))
         }
     };

@@ -11,6 +11,7 @@ pub use modesuite_engine as engine;
 pub use modesuite_engine::prelude;
 pub use modesuite_fem as fem;
 pub use modesuite_pbd as pbd;
+pub use modesuite_render as render;
 pub use modesuite_robots as robots;
 
 pub mod benches;
@@ -29,6 +30,7 @@ impl PluginGroup for DefaultPlugins {
         p.push(Arc::new(modesuite_fem::FemPlugin));
         p.push(Arc::new(modesuite_pbd::PbdPlugin));
         p.push(Arc::new(modesuite_robots::RobotsPlugin));
+        p.push(Arc::new(modesuite_render::RenderPlugin));
         p
     }
 }

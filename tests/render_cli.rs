@@ -1,0 +1,376 @@
+//! Command-line tests of the render features: videos, PNG frames, `bench render`, and the viewer
+//! under Xvfb (the set-up installs xvfb and xdotool).
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use modesuite::render::video::{gif_info, read_png};
+
+fn modesuite() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_modesuite"));
+    c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    c
+}
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "modesuite-render-cli-{}-{name}",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn ok(out: &std::process::Output) -> String {
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "exit {:?}\nstdout: {stdout}\nstderr: {}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+#[test]
+fn run_with_video_writes_a_decodable_gif_and_png_frames() {
+    let dir = tmp_dir("gif");
+    let gif = dir.join("drop.gif");
+    let frames = dir.join("frames");
+    let out = modesuite()
+        .args([
+            "run",
+            "scenes/examples/drop.scene.ron",
+            "--steps",
+            "20",
+            "--video-size",
+            "96x64",
+            "--video",
+        ])
+        .arg(&gif)
+        .arg("--frames")
+        .arg(&frames)
+        .output()
+        .unwrap();
+    let stdout = ok(&out);
+    println!("{stdout}");
+    // dt 1/60: one frame every 2 env steps, plus the reset frame: 11 frames.
+    let (w, h, n) = gif_info(&gif).unwrap_or_else(|e| panic!("{e}"));
+    println!("gif {w}x{h}, {n} frames (expected 96x64, 11)");
+    assert_eq!((w, h, n), (96, 64, 11));
+    let mut pngs: Vec<_> = std::fs::read_dir(&frames)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    pngs.sort();
+    assert_eq!(pngs.len(), 11, "{pngs:?}");
+    let (pw, ph, first) = read_png(&pngs[0]).unwrap();
+    let (_, _, last) = read_png(&pngs[10]).unwrap();
+    assert_eq!((pw, ph), (96, 64));
+    let diff = first.iter().zip(&last).filter(|(a, b)| a != b).count();
+    println!("{diff} bytes differ between the first and the last frame (the bodies fall)");
+    assert!(diff > 50);
+}
+
+#[test]
+fn run_with_a_scene_camera_and_mp4_when_ffmpeg_exists() {
+    let dir = tmp_dir("mp4");
+    let has_ffmpeg = modesuite::render::video::ffmpeg_available();
+    let video = dir.join("tabletop.mp4");
+    let out = modesuite()
+        .args([
+            "run",
+            "scenes/examples/tabletop_cameras.scene.ron",
+            "--steps",
+            "8",
+            "--camera",
+            "overhead",
+            "--video",
+        ])
+        .arg(&video)
+        .output()
+        .unwrap();
+    if !has_ffmpeg {
+        let err = String::from_utf8_lossy(&out.stderr);
+        println!("no ffmpeg: {err}");
+        assert_eq!(out.status.code(), Some(1));
+        assert!(err.contains("ffmpeg") && err.contains(".gif"), "{err}");
+        return;
+    }
+    ok(&out);
+    let probe = Command::new("ffprobe")
+        .args([
+            "-v",
+            "error",
+            "-count_frames",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=width,height,nb_read_frames",
+            "-of",
+            "csv=p=0",
+        ])
+        .arg(&video)
+        .output()
+        .expect("ffprobe comes with ffmpeg");
+    let s = String::from_utf8_lossy(&probe.stdout).trim().to_string();
+    println!("ffprobe: {s} (expected 128,128,5)");
+    assert_eq!(s, "128,128,5");
+}
+
+#[test]
+fn bad_render_arguments_exit_2_with_a_message() {
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &[
+                "run",
+                "scenes/examples/tabletop_cameras.scene.ron",
+                "--steps",
+                "2",
+                "--video",
+                "x.gif",
+                "--camera",
+                "nope",
+            ],
+            "overhead",
+        ),
+        (
+            &[
+                "run",
+                "scenes/examples/drop.scene.ron",
+                "--steps",
+                "2",
+                "--video",
+                "x.gif",
+                "--video-size",
+                "12",
+            ],
+            "WIDTHxHEIGHT",
+        ),
+        (
+            &[
+                "run",
+                "scenes/examples/drop.scene.ron",
+                "--steps",
+                "2",
+                "--camera",
+                "overhead",
+            ],
+            "--video",
+        ),
+        (
+            &["view", "scenes/examples/drop.scene.ron", "--size", "0x10"],
+            "WIDTHxHEIGHT",
+        ),
+    ];
+    for (args, want) in cases {
+        let out = modesuite().args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        println!("{args:?}: {err}");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(err.contains(want), "{err}");
+    }
+    let out = modesuite()
+        .args([
+            "run",
+            "scenes/examples/drop.scene.ron",
+            "--steps",
+            "2",
+            "--video",
+            "x.avi",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains(".gif or .mp4"));
+}
+
+#[test]
+fn bench_render_json_has_the_three_cases() {
+    let out = modesuite()
+        .args(["bench", "render", "--json", "--scale", "0.02"])
+        .output()
+        .unwrap();
+    let stdout = ok(&out);
+    let lines: Vec<serde_json::Value> = stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let cases: Vec<&str> = lines.iter().map(|v| v["case"].as_str().unwrap()).collect();
+    println!("{stdout}");
+    assert_eq!(cases, ["rgbd_128", "rgbd_640", "rgbd_128_x16"]);
+    for v in &lines {
+        assert!(v["steps_per_s"].as_f64().unwrap() > 0.0);
+        for k in ["threads", "envs", "width", "height", "adapter"] {
+            assert!(!v[k].is_null(), "{k} in {v}");
+        }
+    }
+    assert_eq!(lines[2]["envs"], 16);
+}
+
+/// Xvfb on a free display, killed on drop.
+struct Display {
+    child: Child,
+    name: String,
+}
+
+impl Drop for Display {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn start_xvfb() -> Display {
+    for n in 0..20 {
+        let name = format!(":{}", 90 + (std::process::id() as usize + n) % 400);
+        let lock = format!("/tmp/.X{}-lock", &name[1..]);
+        if Path::new(&lock).exists() {
+            continue;
+        }
+        let child = Command::new("Xvfb")
+            .args([
+                name.as_str(),
+                "-screen",
+                "0",
+                "1024x768x24",
+                "-nolisten",
+                "tcp",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("Xvfb: {e} (install the xvfb package; scripts/setup.sh does)")
+            });
+        let d = Display { child, name };
+        if wait_for(Duration::from_secs(20), || {
+            xdotool(&d, &["getdisplaygeometry"]).is_some()
+        }) {
+            return d;
+        }
+    }
+    panic!("could not start Xvfb on a free display");
+}
+
+fn xdotool(d: &Display, args: &[&str]) -> Option<String> {
+    let out = Command::new("xdotool")
+        .args(args)
+        .env("DISPLAY", &d.name)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("xdotool: {e} (install the xdotool package; scripts/setup.sh does)")
+        });
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+/// Polls `f` until it holds or `limit` passes (a readiness wait, not a timing assertion).
+fn wait_for(limit: Duration, mut f: impl FnMut() -> bool) -> bool {
+    let t = Instant::now();
+    while t.elapsed() < limit {
+        if f() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    false
+}
+
+#[test]
+fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
+    let display = start_xvfb();
+    let dir = tmp_dir("viewer");
+    let record = dir.join("episode.json");
+    let mut viewer = modesuite()
+        .args([
+            "view",
+            "scenes/examples/drop.scene.ron",
+            "--size",
+            "320x240",
+            "--paused",
+            "--seed",
+            "5",
+            "--record",
+        ])
+        .arg(&record)
+        .arg("--screenshot-dir")
+        .arg(&dir)
+        .env("DISPLAY", &display.name)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut window = String::new();
+    let found = wait_for(Duration::from_secs(120), || {
+        if let Some(w) = xdotool(&display, &["search", "--name", "modesuite view"]) {
+            window = w.lines().next().unwrap_or("").to_string();
+        }
+        !window.is_empty()
+    });
+    if !found {
+        let _ = viewer.kill();
+        let out = viewer.wait_with_output().unwrap();
+        panic!(
+            "no viewer window; stderr: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let key = |k: &str| {
+        xdotool(&display, &["windowfocus", "--sync", &window]);
+        xdotool(&display, &["key", k]).expect("xdotool key");
+    };
+    let shot = |i: usize| dir.join(format!("modesuite-view-{i:04}.png"));
+    key("p");
+    assert!(
+        wait_for(Duration::from_secs(60), || shot(0).exists()),
+        "first screenshot"
+    );
+    // Orbit the camera, issue two teleoperation actions, take another screenshot.
+    key("Left");
+    key("Left");
+    key("g");
+    key("w");
+    key("p");
+    assert!(
+        wait_for(Duration::from_secs(60), || shot(1).exists()),
+        "second screenshot"
+    );
+    key("Escape");
+    let exited = wait_for(Duration::from_secs(60), || {
+        matches!(viewer.try_wait(), Ok(Some(_)))
+    });
+    if !exited {
+        let _ = viewer.kill();
+    }
+    let out = viewer.wait_with_output().unwrap();
+    println!(
+        "viewer: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(exited && out.status.success(), "the viewer quits on escape");
+    // Screenshots are written when the next frame is drawn: wait for a complete file.
+    let (w0, h0, a) = read_png(&shot(0)).unwrap_or_else(|e| panic!("{e}"));
+    let (_, _, b) = read_png(&shot(1)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((w0, h0), (320, 240));
+    let diff = a
+        .iter()
+        .zip(&b)
+        .filter(|(x, y)| (**x as i32 - **y as i32).abs() > 8)
+        .count();
+    println!(
+        "screenshots differ in {diff} of {} bytes after two orbit steps",
+        a.len()
+    );
+    assert!(diff > 1000, "the camera moved");
+    let rec = modesuite::render::teleop::Recording::load(&record).unwrap_or_else(|e| panic!("{e}"));
+    let names: Vec<_> = rec.episodes[0].actions.iter().map(|a| a.name).collect();
+    println!("recorded: seed {} actions {names:?}", rec.episodes[0].seed);
+    assert_eq!(rec.episodes[0].seed, 5);
+    use modesuite::render::teleop::TeleopAction;
+    assert_eq!(names, [TeleopAction::Grasp, TeleopAction::BodyForward]);
+}
