@@ -13,71 +13,22 @@ use serde::{Deserialize, Serialize};
 
 use crate::RenderError;
 
-/// The 14 discrete teleoperation actions, in action-index order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TeleopAction {
-    /// Base forward.
-    BodyForward,
-    /// Base left (strafe).
-    BodyLeft,
-    /// Base right (strafe).
-    BodyRight,
-    /// Base backward.
-    BodyBack,
-    /// Base turns left (counter-clockwise).
-    TurnLeft,
-    /// Base turns right.
-    TurnRight,
-    /// Hand forward.
-    HandForward,
-    /// Hand back.
-    HandBack,
-    /// Hand left.
-    HandLeft,
-    /// Hand right.
-    HandRight,
-    /// Hand up.
-    HandUp,
-    /// Hand down.
-    HandDown,
-    /// Close the gripper.
-    Grasp,
-    /// Open the gripper.
-    Release,
+/// The 14 discrete teleoperation actions: the robots' [`DiscreteKey`](modesuite_robots::DiscreteKey)
+/// (one definition of the action map and its index order).
+pub use modesuite_robots::DiscreteKey as TeleopAction;
+
+/// Keyboard bindings of the 14 discrete actions.
+pub trait TeleopKeys: Sized {
+    /// The key bound to this action (a lowercase letter).
+    fn key(self) -> char;
+    /// The action bound to a key (case-insensitive).
+    fn from_key(c: char) -> Option<Self>;
+    /// Human-readable name, e.g. `hand up`.
+    fn label(self) -> String;
 }
 
-impl TeleopAction {
-    /// Every action, index order.
-    pub const ALL: [TeleopAction; 14] = [
-        TeleopAction::BodyForward,
-        TeleopAction::BodyLeft,
-        TeleopAction::BodyRight,
-        TeleopAction::BodyBack,
-        TeleopAction::TurnLeft,
-        TeleopAction::TurnRight,
-        TeleopAction::HandForward,
-        TeleopAction::HandBack,
-        TeleopAction::HandLeft,
-        TeleopAction::HandRight,
-        TeleopAction::HandUp,
-        TeleopAction::HandDown,
-        TeleopAction::Grasp,
-        TeleopAction::Release,
-    ];
-
-    /// The action index (0..14).
-    pub fn index(self) -> u32 {
-        Self::ALL.iter().position(|a| *a == self).unwrap_or(0) as u32
-    }
-
-    /// The action of an index.
-    pub fn from_index(i: u32) -> Option<Self> {
-        Self::ALL.get(i as usize).copied()
-    }
-
-    /// The key bound to this action (a lowercase letter).
-    pub fn key(self) -> char {
+impl TeleopKeys for TeleopAction {
+    fn key(self) -> char {
         match self {
             TeleopAction::BodyForward => 'w',
             TeleopAction::BodyLeft => 'a',
@@ -96,26 +47,13 @@ impl TeleopAction {
         }
     }
 
-    /// The action bound to a key (case-insensitive).
-    pub fn from_key(c: char) -> Option<Self> {
+    fn from_key(c: char) -> Option<Self> {
         let c = c.to_ascii_lowercase();
         Self::ALL.iter().copied().find(|a| a.key() == c)
     }
 
-    /// Human-readable name, e.g. `hand up`.
-    pub fn label(self) -> String {
-        format!("{self:?}")
-            .chars()
-            .enumerate()
-            .flat_map(|(i, c)| {
-                let lower = c.to_ascii_lowercase();
-                if c.is_ascii_uppercase() && i > 0 {
-                    vec![' ', lower]
-                } else {
-                    vec![lower]
-                }
-            })
-            .collect()
+    fn label(self) -> String {
+        self.name().replace('_', " ")
     }
 }
 
@@ -189,7 +127,7 @@ impl Recording {
         if let Some(ep) = self.episodes.last_mut() {
             ep.actions.push(RecordedAction {
                 step,
-                action: action.index(),
+                action: action.index() as u32,
                 name: action,
             });
         }
@@ -227,8 +165,8 @@ mod tests {
     fn fourteen_actions_with_unique_keys() {
         assert_eq!(TeleopAction::ALL.len(), 14);
         for (i, a) in TeleopAction::ALL.iter().enumerate() {
-            assert_eq!(a.index(), i as u32);
-            assert_eq!(TeleopAction::from_index(i as u32), Some(*a));
+            assert_eq!(a.index(), i);
+            assert_eq!(TeleopAction::from_index(i), Some(*a));
             assert_eq!(TeleopAction::from_key(a.key()), Some(*a), "key of {a:?}");
         }
         assert_eq!(TeleopAction::HandUp.label(), "hand up");

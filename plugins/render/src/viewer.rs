@@ -25,7 +25,7 @@ use winit::window::{Window, WindowId};
 use crate::config::CameraDesc;
 use crate::gpu::RenderDevice;
 use crate::renderer::{EnvRenderer, Orbit};
-use crate::teleop::{Recording, TeleopAction, TeleopCommand};
+use crate::teleop::{Recording, TeleopAction, TeleopCommand, TeleopKeys};
 use crate::RenderError;
 
 /// Options of [`run_viewer`].

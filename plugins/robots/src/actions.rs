@@ -16,7 +16,7 @@
 //! With `discrete: true` the robot's whole action is one `Discrete(14)` value, the 14 keys of
 //! [`DiscreteKey`], each mapped onto the continuous modes at full speed for one control step.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use modesuite_engine::Space;
 
@@ -57,8 +57,10 @@ pub enum GripperMode {
     Binary,
 }
 
-/// The 14 discrete actions (keys) of both robots, in action-index order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The 14 discrete actions (keys) of both robots, in action-index order (serialised by their
+/// snake-case names, as in teleoperation recordings).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum DiscreteKey {
     /// Base forward (+x of the base).
     BodyForward,
@@ -112,6 +114,11 @@ impl DiscreteKey {
     /// The key of an action index.
     pub fn from_index(i: usize) -> Option<Self> {
         Self::ALL.get(i).copied()
+    }
+
+    /// The action index (0..14).
+    pub fn index(self) -> usize {
+        self as usize
     }
 
     /// Snake-case name (`body_forward`, ..., `release`).
