@@ -344,3 +344,118 @@ fn arm_joint_targets_respect_velocity_limits() {
     assert!(peak <= limit * 1.1);
     assert!(peak >= limit * 0.8, "it should move at about the limit");
 }
+
+/// Height range (min, max) of a deformable object's nodes.
+fn z_range(env: &mut Env, name: &str) -> (f64, f64) {
+    use modesuite::engine::components::{DeformableNodes, Object};
+    let mut q = env.app.world.query::<(&Object, &DeformableNodes)>();
+    let (_, nodes) = q
+        .iter(&env.app.world)
+        .find(|(o, _)| o.name == name)
+        .unwrap_or_else(|| panic!("no deformable named {name}"));
+    nodes
+        .0
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.z), hi.max(p.z))
+        })
+}
+
+fn step_n(env: &mut Env, n: usize) {
+    for _ in 0..n {
+        let o = env.step(&[]);
+        assert!(o.info.error.is_none(), "{:?}", o.info.error);
+    }
+}
+
+#[test]
+fn a_closed_gripper_lifts_the_napkin_and_opening_releases_it() {
+    let mut env = scene_env("franka_cloth_grasp");
+    let (z0, _) = z_range(&mut env, "napkin");
+    step_n(&mut env, 200); // t = 3.3 s: fingers around the near edge, still open
+    let (_, before) = z_range(&mut env, "napkin");
+    step_n(&mut env, 220); // closed at 3.5 s, lifted by 5.5 s, carried sideways by 7 s
+    let (_, lifted) = z_range(&mut env, "napkin");
+    let held = env
+        .app
+        .world
+        .resource::<modesuite::pbd::PbdContext>()
+        .bodies[0]
+        .solver
+        .attachment_ids()
+        .len();
+    step_n(&mut env, 120); // opened at 8 s, t = 9 s (the episode ends at 10 s)
+    let (_, dropped) = z_range(&mut env, "napkin");
+    println!(
+        "napkin top: start {z0:.3} m, before closing {before:.3}, held {lifted:.3} ({held} grasp), after opening {dropped:.3}"
+    );
+    assert!(
+        before < 0.47,
+        "the open gripper leaves the napkin on the table"
+    );
+    assert_eq!(held, 1, "one grasp while the gripper is closed");
+    assert!(
+        lifted > 0.65,
+        "the grasped edge is lifted with the hand (> 0.65 m)"
+    );
+    assert!(dropped < 0.46, "the released napkin falls back");
+    let attachments = env
+        .app
+        .world
+        .resource::<modesuite::pbd::PbdContext>()
+        .bodies[0]
+        .solver
+        .attachment_ids()
+        .len();
+    assert_eq!(attachments, 0, "opening released the grasp");
+}
+
+#[test]
+fn a_closed_gripper_lifts_a_foam_rod_and_a_reset_drops_the_grasp() {
+    let text = std::fs::read_to_string(common::root().join("scenes/examples/franka_cloth_grasp.scene.ron"))
+        .unwrap()
+        .replace(
+            r#"shape: Grid(size: (0.3, 0.3), resolution: (13, 13)),
+            pose: (pos: (0.82, 0.0, 0.455)),
+            body: Kind(kind: "pbd.cloth", params: (
+                areal_density: 0.2,
+                friction: 0.6,
+                groups: {"edge": Near(at: (-0.15, 0.0, 0.0), radius: 0.03)},
+            )),"#,
+            r#"shape: Box(size: (0.3, 0.03, 0.03), divisions: (6, 1, 1)),
+            pose: (pos: (0.83, 0.0, 0.466)),
+            body: Kind(kind: "fem.solid", params: (youngs_modulus: 1e6, poisson_ratio: 0.35, density: 60.0, rayleigh_mass: 1.0)),"#,
+        );
+    assert!(text.contains("fem.solid"));
+    let mut env = Env::new(common::app_from_ron(&text));
+    env.reset(Some(0));
+    let hash0 = env.state_hash();
+    step_n(&mut env, 200);
+    let (_, before) = z_range(&mut env, "napkin");
+    step_n(&mut env, 220);
+    let (_, lifted) = z_range(&mut env, "napkin");
+    let grasps = |env: &Env| {
+        env.app
+            .world
+            .resource::<modesuite::fem::FemContext>()
+            .bodies[0]
+            .solver
+            .attached_bodies()
+            .len()
+    };
+    let held = grasps(&env);
+    println!("rod top: before closing {before:.3} m, held {lifted:.3} ({held} grasping body)");
+    assert!(before < 0.49);
+    assert_eq!(held, 1);
+    assert!(
+        lifted > 0.6,
+        "the grasped end is lifted with the hand (> 0.6 m)"
+    );
+    env.reset(Some(0));
+    assert_eq!(
+        grasps(&env),
+        0,
+        "a reset restores the state before the grasp"
+    );
+    assert_eq!(env.state_hash(), hash0);
+}

@@ -11,11 +11,11 @@ use std::any::Any;
 
 use bevy_ecs::component::Mutable;
 use bevy_ecs::prelude::*;
-use nalgebra::Vector3;
+use nalgebra::{Isometry3, Vector3};
 
 use crate::app::SimErrors;
 use crate::components::{DeformableNodes, Object};
-use crate::coupling::{ContactQuery, NoColliders, Reaction};
+use crate::coupling::{ContactQuery, GripperState, Grippers, NoColliders, Reaction};
 use crate::rigid::{DeformableSystems, RigidContext};
 use crate::state::{PluginStates, StateHasher, Stateful};
 use crate::terms::{passive_forces_for, ForceContext, SceneTerms};
@@ -50,6 +50,20 @@ pub trait DeformableSolver: Send + Sync + 'static {
     fn set_passive_forces(&mut self, forces: &[Vector3<f64>]) -> Result<(), String> {
         let _ = forces;
         Err("this solver does not accept passive forces".to_string())
+    }
+    /// Brings the solver's rigid frames up to date before a step: `pose_of` gives the current
+    /// pose of any body id (attachments and grasps follow their bodies), and `grippers` is the
+    /// level-triggered gripper state of the env ([`Grippers`]): a closed gripper holding nothing
+    /// of this body grasps what lies inside its finger volume; an open one releases what it
+    /// holds. Grasps belong to the solver's state, so snapshots carry them. Default: the solver
+    /// has no rigid frames (nothing to do).
+    fn sync_rigid(
+        &mut self,
+        grippers: &[GripperState],
+        pose_of: &dyn Fn(u32) -> Option<Isometry3<f64>>,
+    ) -> Result<(), String> {
+        let _ = (grippers, pose_of);
+        Ok(())
     }
 }
 
@@ -163,6 +177,7 @@ fn deformable_step<S: DeformableSolver>(
     settings: Res<SimSettings>,
     clock: Res<SimClock>,
     terms: Option<Res<SceneTerms>>,
+    grippers: Option<Res<Grippers>>,
     mut states: Option<ResMut<PluginStates>>,
     mut errors: ResMut<SimErrors>,
     names: Query<&Object>,
@@ -186,6 +201,14 @@ fn deformable_step<S: DeformableSolver>(
                 &mut buffer,
             ) {
                 errors.raise(format!("object \"{}\": {e}", object.name));
+                continue;
+            }
+        }
+        if let Some(r) = rigid.as_deref() {
+            let grippers = grippers.as_deref().map_or(&[][..], |g| &g.0);
+            if let Err(e) = body.solver.sync_rigid(grippers, &|id| r.body_pose(id)) {
+                let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
+                errors.raise(format!("object \"{name}\": {e}"));
                 continue;
             }
         }

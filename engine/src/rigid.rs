@@ -237,6 +237,12 @@ impl RigidContext {
         self.body_ids.get(id as usize).copied()
     }
 
+    /// Current pose (`world_from_body`) of a body id.
+    pub fn body_pose(&self, id: u32) -> Option<Isometry3<f64>> {
+        let (h, _) = self.body_of_id(id)?;
+        self.bodies.get(h).map(|b| pose_from_rapier(b.position()))
+    }
+
     /// Queues an impulse a deformable applied to a body; it is applied as a force in the next
     /// rapier step.
     pub fn push_reaction(&mut self, r: Reaction) {

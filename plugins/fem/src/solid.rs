@@ -778,6 +778,28 @@ impl FemSolid {
         Ok(())
     }
 
+    /// Ids of the rigid bodies that attachments or grasps follow (sorted, unique).
+    pub fn attached_bodies(&self) -> Vec<u32> {
+        let mut b: Vec<u32> = self
+            .attachments
+            .iter()
+            .map(|a| a.body)
+            .chain(self.grasps.iter().map(|g| g.body))
+            .collect();
+        b.sort_unstable();
+        b.dedup();
+        b
+    }
+
+    /// Ids of the grasps held by rigid body `body`, in creation order.
+    pub fn grasps_of(&self, body: u32) -> Vec<u32> {
+        self.grasps
+            .iter()
+            .filter(|g| g.body == body)
+            .map(|g| g.id)
+            .collect()
+    }
+
     /// State of a grasp after the last step.
     pub fn grasp_info(&self, id: u32) -> Result<GraspInfo, FemError> {
         let g = self

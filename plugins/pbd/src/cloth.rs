@@ -924,6 +924,33 @@ impl Cloth {
         self.attachment(id).map(|a| a.slipped)
     }
 
+    /// The first frame that follows rigid body `body`, if any.
+    pub fn frame_of_body(&self, body: u32) -> Option<FrameId> {
+        self.frames
+            .iter()
+            .position(|f| f.body == body)
+            .map(|i| FrameId(i as u32))
+    }
+
+    /// Frames that follow a rigid body (body id other than `u32::MAX`), with their body ids.
+    pub fn body_frames(&self) -> Vec<(FrameId, u32)> {
+        self.frames
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.body != u32::MAX)
+            .map(|(i, f)| (FrameId(i as u32), f.body))
+            .collect()
+    }
+
+    /// The force-limited (grasp) attachments on `frame`, in creation order.
+    pub fn grasps_on(&self, frame: FrameId) -> Vec<AttachmentId> {
+        self.attachments
+            .iter()
+            .filter(|a| a.frame == Some(frame.0) && !a.kinematic)
+            .map(|a| AttachmentId(a.id))
+            .collect()
+    }
+
     /// Ids of all attachments, in creation order.
     pub fn attachment_ids(&self) -> Vec<AttachmentId> {
         self.attachments

@@ -115,8 +115,19 @@ pub struct ScriptEe {
     pub pos: [f64; 3],
 }
 
-/// A robot that drives itself (demo scenes): base commands and an end-effector path, repeated
-/// every `period` seconds when given. A scripted robot takes no part of the env's action.
+/// One gripper command of a script: from time `t` the gripper is closed or open.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScriptGripper {
+    /// Start time, s.
+    pub t: f64,
+    /// Closed (grasps what is between the fingers) or open (releases).
+    pub closed: bool,
+}
+
+/// A robot that drives itself (demo scenes): base commands, an end-effector path and gripper
+/// commands, repeated every `period` seconds when given. A scripted robot takes no part of the
+/// env's action.
 #[derive(Debug, Clone, PartialEq, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct Script {
@@ -126,6 +137,9 @@ pub struct Script {
     /// Piecewise-linear end-effector waypoints, sorted by time.
     #[serde(default)]
     pub ee: Vec<ScriptEe>,
+    /// Piecewise-constant gripper commands, sorted by time (open before the first).
+    #[serde(default)]
+    pub gripper: Vec<ScriptGripper>,
     /// Repeat period, s.
     #[serde(default)]
     pub period: Option<f64>,
@@ -323,6 +337,13 @@ fn check_script(path: &str, s: &Script) -> Result<(), SceneError> {
             format!("{path}.script.ee"),
             format!("{:?}", s.ee),
             "waypoints sorted by finite t with finite positions",
+        ));
+    }
+    if !sorted(s.gripper.iter().map(|g| g.t).collect()) {
+        return Err(SceneError::semantic(
+            format!("{path}.script.gripper"),
+            format!("{:?}", s.gripper),
+            "entries sorted by finite t",
         ));
     }
     if let Some(p) = s.period {
@@ -674,6 +695,15 @@ fn lerp_script(s: &Script, t: f64) -> Command {
             .map(|b| b.v)
             .unwrap_or([0.0; 3]);
         cmd.base = Some(v);
+    }
+    if !s.gripper.is_empty() {
+        cmd.gripper = Some(
+            s.gripper
+                .iter()
+                .rev()
+                .find(|g| g.t <= t)
+                .is_some_and(|g| g.closed),
+        );
     }
     if let (Some(first), Some(last)) = (s.ee.first(), s.ee.last()) {
         let pos = if t <= first.t {
