@@ -119,6 +119,14 @@ pub struct RunArgs {
     /// Size of the default orbit camera, WIDTHxHEIGHT.
     #[arg(long, default_value = "480x320")]
     pub video_size: String,
+    /// Who acts: `zero` (all-zero action), `random` (uniform over the action space, seeded by
+    /// the episode seed) or `scripted` (the task's expert).
+    #[arg(long, default_value = "zero")]
+    pub policy: String,
+    /// Action modes of the (first) robot for this run, RON, replacing the scene's, e.g.
+    /// `(base: Velocity, arm: JointDelta, gripper: Off)`.
+    #[arg(long)]
+    pub actions: Option<String>,
 }
 
 /// Arguments of `view`.
@@ -232,28 +240,36 @@ fn io(e: std::io::Error) -> CliError {
 }
 
 fn run_default(out: &mut dyn Write) -> Result<(), CliError> {
+    let video = PathBuf::from(crate::DEFAULT_VIDEO);
     writeln!(
         out,
-        "modesuite: running the embedded default scene ({}). The MoDeSuite task episode with a video becomes the default once the tasks and render plugins land.",
-        crate::DEFAULT_SCENE_NAME
+        "modesuite: the embedded default: {} with its scripted expert, one episode, video {}\n(the same as `modesuite run {} --policy scripted --video {}`)",
+        crate::DEFAULT_TASK,
+        video.display(),
+        crate::DEFAULT_TASK,
+        video.display()
     )
     .map_err(io)?;
-    let desc = scene::parse_str(crate::DEFAULT_SCENE, crate::DEFAULT_SCENE_NAME)?;
-    let source = SceneSource::in_memory(".");
+    if let Some(dir) = video.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| CliError::runtime(format!("{}: {e}", dir.display())))?;
+    }
     let args = RunArgs {
-        target: crate::DEFAULT_SCENE_NAME.to_string(),
+        target: crate::DEFAULT_TASK.to_string(),
         steps: None,
         seed: 0,
         episodes: 1,
         dump_state: None,
         json: false,
         plugin: Vec::new(),
-        video: None,
+        video: Some(video),
         frames: None,
         camera: None,
         video_size: "480x320".into(),
+        policy: "scripted".into(),
+        actions: None,
     };
-    run_scene(&desc, &source, &args, &[], out)
+    run(&args, out)
 }
 
 fn list(
@@ -426,26 +442,96 @@ fn validate(
     Ok(())
 }
 
-/// Loads a scene file named on the command line (task ids are not available yet).
-fn load_target(target: &str) -> Result<(SceneDesc, SceneSource), CliError> {
+/// The scenes folder task ids resolve in: `$MODESUITE_SCENES`, else the repository's `scenes/`
+/// (the binary falls back to its embedded copies of the task files).
+pub fn scenes_dir() -> PathBuf {
+    std::env::var_os("MODESUITE_SCENES")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes"))
+}
+
+/// Loads a scene file or a task id (`MoDe-<Robot>-<Task>-v0`) named on the command line.
+pub fn load_target(target: &str) -> Result<(SceneDesc, SceneSource), CliError> {
     let path = Path::new(target);
     if path.is_file() {
         return Ok(scene::load_file(path)?);
     }
     if target.starts_with("MoDe-") {
-        return Err(CliError::input(format!(
-            "{target}: the MoDeSuite task environments are not implemented yet (they arrive with the tasks plugin); run a scene file instead, e.g. {}",
-            crate::DEFAULT_SCENE_NAME
-        )));
+        let dir = scenes_dir();
+        let file = modesuite_tasks::task_scene_path(&dir, target).map_err(CliError::input)?;
+        if file.is_file() {
+            return Ok(scene::load_file(&file)?);
+        }
+        let rel = file
+            .strip_prefix(&dir)
+            .map(|r| r.to_string_lossy().replace('\\', "/"))
+            .unwrap_or_default();
+        let text = modesuite_tasks::embedded(&rel)
+            .ok_or_else(|| CliError::input(format!("{target}: {} is missing", file.display())))?;
+        let label = format!("{}/{rel}", modesuite_tasks::EMBEDDED_DIR);
+        let desc = scene::parse_str(text, &label)?;
+        let folder = Path::new(&label)
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_default();
+        return Ok((desc, SceneSource::in_memory(folder)));
     }
     Err(CliError::input(format!(
         "{target}: no such scene file, and not a task id (MoDe-<Robot>-<Task>-v0)"
     )))
 }
 
+/// Replaces the `actions` of the first robot of the scene's `robots` section with `ron`.
+fn override_actions(desc: &mut SceneDesc, ron_text: &str) -> Result<(), CliError> {
+    let bad = |m: &str| CliError::input(format!("--actions {ron_text}: {m}"));
+    modesuite_robots::ActionConfig::parse_ron(ron_text).map_err(|e| bad(&e))?;
+    let raw = desc
+        .extensions
+        .get("robots")
+        .ok_or_else(|| bad("the scene has no robots section"))?;
+    let text = raw.get_ron().to_string();
+    let new = match text.find("actions:") {
+        Some(k) => {
+            let open = k + text[k..]
+                .find('(')
+                .ok_or_else(|| bad("unreadable robots section"))?;
+            let mut depth = 0usize;
+            let mut end = None;
+            for (i, c) in text[open..].char_indices() {
+                match c {
+                    '(' => depth += 1,
+                    ')' => {
+                        depth -= 1;
+                        if depth == 0 {
+                            end = Some(open + i + 1);
+                            break;
+                        }
+                    }
+                    _ => {}
+                }
+            }
+            let end = end.ok_or_else(|| bad("unreadable robots section"))?;
+            format!("{}actions: {ron_text}{}", &text[..k], &text[end..])
+        }
+        None => {
+            let k = text
+                .find("(name:")
+                .ok_or_else(|| bad("the robots section lists no robot"))?;
+            format!("{}(actions: {ron_text}, {}", &text[..k], &text[k + 1..])
+        }
+    };
+    let value = ron::value::RawValue::from_boxed_ron(new.into_boxed_str())
+        .map_err(|e| bad(&e.to_string()))?;
+    desc.extensions.insert("robots".into(), value);
+    Ok(())
+}
+
 fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let plugins = load_plugins(&args.plugin)?;
-    let (desc, source) = load_target(&args.target)?;
+    let (mut desc, source) = load_target(&args.target)?;
+    if let Some(a) = &args.actions {
+        override_actions(&mut desc, a)?;
+    }
     run_scene(&desc, &source, args, &plugins, out)
 }
 
@@ -692,7 +778,9 @@ fn run_scene(
     // The CLI resets between episodes itself, so the final state stays for --dump-state.
     env.autoreset = false;
     let act_dim = env.spaces().action.flat_dim();
-    let zero = vec![0.0f32; act_dim];
+    let mut action = vec![0.0f32; act_dim];
+    let kind: modesuite_tasks::PolicyKind = args.policy.parse().map_err(CliError::input)?;
+    let mut policy = modesuite_tasks::make_policy(kind, &env).map_err(CliError::input)?;
     if !args.json {
         writeln!(
             out,
@@ -711,6 +799,7 @@ fn run_scene(
     for ep in 0..args.episodes {
         let seed = args.seed.wrapping_add(ep);
         env.reset(Some(seed));
+        policy.reset(seed);
         if let Some(r) = recorder.as_mut() {
             r.capture(&env.app.world, 0)?;
         }
@@ -720,7 +809,11 @@ fn run_scene(
         let mut success = None;
         let mut error = None;
         for i in 0..steps {
-            let o = env.step(&zero);
+            if let Err(e) = policy.act(&env, &mut action) {
+                error = Some(format!("policy: {e}"));
+                break;
+            }
+            let o = env.step(&action);
             ret += o.reward;
             length = i + 1;
             if let Some(r) = recorder.as_mut() {

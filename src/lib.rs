@@ -13,6 +13,7 @@ pub use modesuite_fem as fem;
 pub use modesuite_pbd as pbd;
 pub use modesuite_render as render;
 pub use modesuite_robots as robots;
+pub use modesuite_tasks as tasks;
 
 pub mod benches;
 pub mod cli;
@@ -30,12 +31,19 @@ impl PluginGroup for DefaultPlugins {
         p.push(Arc::new(modesuite_fem::FemPlugin));
         p.push(Arc::new(modesuite_pbd::PbdPlugin));
         p.push(Arc::new(modesuite_robots::RobotsPlugin));
+        p.push(Arc::new(modesuite_tasks::TasksPlugin));
         p.push(Arc::new(modesuite_render::RenderPlugin));
         p
     }
 }
 
-/// The embedded default scene (`modesuite` without arguments runs it).
+/// The task `modesuite` without arguments runs (its scene is embedded in the binary), with the
+/// scripted expert and a video.
+pub const DEFAULT_TASK: &str = "MoDe-Franka-Place-v0";
+/// Where the default run writes its video.
+pub const DEFAULT_VIDEO: &str = "out/MoDe-Franka-Place-v0.gif";
+
+/// A small embedded example scene (a box dropped on the ground) used by tests and examples.
 pub const DEFAULT_SCENE: &str = include_str!("../scenes/examples/drop.scene.ron");
 /// The file name the embedded default scene is reported under.
 pub const DEFAULT_SCENE_NAME: &str = "scenes/examples/drop.scene.ron";

@@ -88,6 +88,8 @@ pub struct SectionCompileContext<'a> {
     pub frames: &'a BTreeMap<String, nalgebra::Isometry3<f64>>,
     /// Where the scene came from (errors map into the file).
     pub source: &'a crate::scene::SceneSource,
+    /// The app's registries (terms, robots, sensors other plugins registered).
+    pub registry: &'a Registry,
 }
 
 impl SectionCompileContext<'_> {

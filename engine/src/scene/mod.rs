@@ -637,6 +637,7 @@ fn compile_inner(
             objects: &objects,
             frames: &frames,
             source,
+            registry,
         };
         let compiled = handler.compile(&ctx)?;
         sections.push(CompiledSceneSection {

@@ -212,6 +212,15 @@ pub struct ActionConfig {
     pub leg_scale: f64,
 }
 
+impl ActionConfig {
+    /// Parses an `actions:` value written on its own (command-line overrides); errors are RON's.
+    pub fn parse_ron(text: &str) -> Result<Self, String> {
+        modesuite_engine::scene::ron_options()
+            .from_str(text)
+            .map_err(|e| e.to_string())
+    }
+}
+
 impl Default for ActionConfig {
     fn default() -> Self {
         Self {

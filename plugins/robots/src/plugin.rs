@@ -165,6 +165,10 @@ pub struct RobotDesc {
     /// Self-driving script (demo scenes); the robot then takes no action.
     #[serde(default)]
     pub script: Option<Script>,
+    /// The gripper starts closed (the elastic tasks start with the rod or belt in the hand;
+    /// with the gripper action `Off` it stays closed).
+    #[serde(default)]
+    pub start_closed: bool,
 }
 
 /// A compiled robot: model, spec, modes.
@@ -542,7 +546,7 @@ fn build_runtime(
         controller,
         base_command: BaseVelocity::default(),
         ee_target: ee_start,
-        gripper_closed: false,
+        gripper_closed: c.desc.start_closed,
     })
 }
 

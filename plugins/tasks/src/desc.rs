@@ -1,0 +1,241 @@
+//! The `task` scene section as written (serde), and `extends`.
+//!
+//! ```ron
+//! extensions: {
+//!     "task": (
+//!         id: "MoDe-Franka-Place-v0",
+//!         extends: "place.task.ron",            // a file with a partial section, merged under this one
+//!         points: {"rod_end": Nodes(object: "rod", select: Box(min: (0.40, -1, -1), max: (0.42, 1, 1)))},
+//!         targets: {"table": (pos: (1.5, 1.5, 0.83), range: (0.05, 0.05, 0.0))},
+//!         rewards: {"end_to_table": (term: "distance", weight: -1.0, params: (a: Point("rod_end"), b: Target("table")))},
+//!         success: {"end_on_table": (term: "in_box", params: (point: Point("rod_end"), center: Target("table"), min: (-0.56, -0.4, 0.0), max: (0.56, 0.4, 0.15)))},
+//!         success_bonus: 20.0,
+//!         observations: {"policy": (terms: [(term: "base_xy"), (term: "tracked", params: (object: "rod", k: 4))])},
+//!         events: {"start": RobotPose(xy: 0.1, yaw: 0.1, carry: ["rod"])},
+//!     ),
+//! }
+//! ```
+//! Every map is keyed by a name: a section that `extends` another replaces the parent's entries
+//! of the same name and adds the others; scalar fields replace the parent's when given.
+
+use std::collections::BTreeMap;
+
+use modesuite_engine::scene::NodeSelect;
+use ron::value::RawValue;
+use serde::Deserialize;
+
+/// A point of the task, as terms refer to it.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub enum PointRef {
+    /// A named point of the section's `points`.
+    Point(String),
+    /// A target of the section's `targets` (its randomised position).
+    Target(String),
+    /// The robot's base frame origin (on the floor).
+    Base,
+    /// The robot's end-effector (tool centre point).
+    Ee,
+    /// The origin of a scene object (rigid bodies, robot links `robot/link`).
+    Object(String),
+    /// The centroid of a deformable object's nodes.
+    Centroid(String),
+    /// The centroid of the nodes of a deformable object selected in its rest (object) frame.
+    Nodes {
+        /// Object name.
+        object: String,
+        /// Selection in the object frame at spawn.
+        select: NodeSelect,
+    },
+    /// Tracked point `i` of `k` of a deformable: the node nearest to station `i` of `k` spread
+    /// uniformly along the longest axis of its rest shape (`i = 0` at the low end).
+    Tracked {
+        /// Object name.
+        object: String,
+        /// Station, `0..k`.
+        i: usize,
+        /// Number of stations (>= 1).
+        k: usize,
+    },
+    /// A fixed world point.
+    Const((f64, f64, f64)),
+}
+
+/// A target: a world point randomised uniformly within `pos +- range` at every reset.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetDesc {
+    /// Nominal position, m.
+    pub pos: (f64, f64, f64),
+    /// Half-width of the uniform randomisation per axis, m.
+    #[serde(default)]
+    pub range: (f64, f64, f64),
+}
+
+/// A configured term: a registered term name and its RON parameters.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TermDesc {
+    /// Registered task term (`modesuite list` shows them).
+    pub term: String,
+    /// Its parameters (default: none, `()`).
+    #[serde(default)]
+    pub params: Option<Box<RawValue>>,
+}
+
+/// A reward term: `weight x value` (x the env step length when `dt_scaled`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RewardDesc {
+    /// Registered task term.
+    pub term: String,
+    /// Its parameters.
+    #[serde(default)]
+    pub params: Option<Box<RawValue>>,
+    /// Weight.
+    pub weight: f64,
+    /// Multiply by the env step length, s (Isaac Lab's convention).
+    #[serde(default)]
+    pub dt_scaled: bool,
+}
+
+/// One observation term of a group, with its post-processing (scale, then clip).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObsTermDesc {
+    /// Registered task term.
+    pub term: String,
+    /// Its parameters.
+    #[serde(default)]
+    pub params: Option<Box<RawValue>>,
+    /// Multiplies every value.
+    #[serde(default)]
+    pub scale: Option<f64>,
+    /// Clips every (scaled) value to `[lo, hi]`.
+    #[serde(default)]
+    pub clip: Option<(f64, f64)>,
+}
+
+/// An observation group: its terms concatenated, optional noise and history.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroupDesc {
+    /// Terms in order.
+    pub terms: Vec<ObsTermDesc>,
+    /// Uniform noise `+- noise` added to every value (after scale and clip), from the env's RNG.
+    #[serde(default)]
+    pub noise: f64,
+    /// Number of most recent frames stacked, newest last (>= 1).
+    #[serde(default = "one")]
+    pub history: usize,
+}
+
+fn one() -> usize {
+    1
+}
+
+/// A reset event (randomisation).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub enum EventDesc {
+    /// Moves the robot's holonomic base by a uniform offset (`+- xy` m, `+- yaw` rad about the
+    /// base origin) and the `carry` deformables with it (an object held in the gripper).
+    RobotPose {
+        /// Half-width of the x and y offset, m.
+        xy: f64,
+        /// Half-width of the yaw offset, rad.
+        yaw: f64,
+        /// Deformable objects moved rigidly with the base.
+        #[serde(default)]
+        carry: Vec<String>,
+    },
+    /// Translates a deformable object by a uniform offset `+- xy` in x and y.
+    ObjectOffset {
+        /// Object name.
+        object: String,
+        /// Half-width, m.
+        xy: f64,
+    },
+}
+
+/// A deformable held by the robot from the start: the selected nodes (object frame, at spawn)
+/// are attached kinematically to the body carrying the gripper (the precursor's rod in hand).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeldDesc {
+    /// A `fem.solid` object.
+    pub object: String,
+    /// The held nodes.
+    pub select: NodeSelect,
+}
+
+/// The `task` section.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskDesc {
+    /// Environment id, `MoDe-<Robot>-<Task>-v0`.
+    #[serde(default)]
+    pub id: Option<String>,
+    /// A `*.task.ron` file (relative to the scene file) whose section this one extends.
+    #[serde(default)]
+    pub extends: Option<String>,
+    /// The robot the task observes and the expert drives (default `robot`).
+    #[serde(default)]
+    pub robot: Option<String>,
+    /// Name of the scripted expert (see `modesuite list`).
+    #[serde(default)]
+    pub expert: Option<String>,
+    /// Named points.
+    #[serde(default)]
+    pub points: BTreeMap<String, PointRef>,
+    /// Targets (randomised at reset).
+    #[serde(default)]
+    pub targets: BTreeMap<String, TargetDesc>,
+    /// Reward terms.
+    #[serde(default)]
+    pub rewards: BTreeMap<String, RewardDesc>,
+    /// Success terms: the task succeeds when every one is non-zero (this ends the episode).
+    #[serde(default)]
+    pub success: BTreeMap<String, TermDesc>,
+    /// Reward added on the step of success.
+    #[serde(default)]
+    pub success_bonus: Option<f64>,
+    /// Failure terms: a non-zero value ends the episode (terminated, not a success).
+    #[serde(default)]
+    pub terminations: BTreeMap<String, TermDesc>,
+    /// Observation groups; the env's observation is the group `policy`.
+    #[serde(default)]
+    pub observations: BTreeMap<String, GroupDesc>,
+    /// Reset events, run in name order.
+    #[serde(default)]
+    pub events: BTreeMap<String, EventDesc>,
+    /// A deformable in the robot's hand from the start.
+    #[serde(default)]
+    pub held: Option<HeldDesc>,
+}
+
+impl TaskDesc {
+    /// Lays `self` over `parent`: scalars given here win, maps merge by key (entries here win).
+    pub fn over(self, parent: TaskDesc) -> TaskDesc {
+        fn merge<V>(
+            mut base: BTreeMap<String, V>,
+            top: BTreeMap<String, V>,
+        ) -> BTreeMap<String, V> {
+            base.extend(top);
+            base
+        }
+        TaskDesc {
+            id: self.id.or(parent.id),
+            extends: None,
+            robot: self.robot.or(parent.robot),
+            expert: self.expert.or(parent.expert),
+            points: merge(parent.points, self.points),
+            targets: merge(parent.targets, self.targets),
+            rewards: merge(parent.rewards, self.rewards),
+            success: merge(parent.success, self.success),
+            success_bonus: self.success_bonus.or(parent.success_bonus),
+            terminations: merge(parent.terminations, self.terminations),
+            observations: merge(parent.observations, self.observations),
+            events: merge(parent.events, self.events),
+            held: self.held.or(parent.held),
+        }
+    }
+}

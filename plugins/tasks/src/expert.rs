@@ -1,0 +1,237 @@
+//! Policies for `modesuite run --policy`: `zero`, `random` (uniform over the action space, its
+//! own seeded RNG) and `scripted` (the task's expert, named by the task section's `expert`).
+//!
+//! Experts read the task's state the way a privileged teacher would: [`TaskPoints`] (named
+//! points and targets), the robot's [`RobotObservation`](modesuite_robots::RobotObservation)
+//! and controller targets, and write actions in the robot's configured action modes.
+
+use modesuite_engine::rng::EnvRng;
+use modesuite_engine::{Env, RigidContext, SimSettings, Space};
+use modesuite_robots::{ArmMode, BaseMode, GripperMode, RobotRuntime, Robots};
+use nalgebra::{UnitQuaternion, Vector2, Vector3};
+
+use crate::manager::{Task, TaskPoints};
+
+/// Which policy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PolicyKind {
+    /// All-zero action.
+    Zero,
+    /// Uniform random action.
+    Random,
+    /// The task's scripted expert.
+    Scripted,
+}
+
+impl std::str::FromStr for PolicyKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "zero" => Ok(Self::Zero),
+            "random" => Ok(Self::Random),
+            "scripted" => Ok(Self::Scripted),
+            _ => Err(format!("--policy {s}: zero, random or scripted")),
+        }
+    }
+}
+
+/// Chooses an action for the env's current state.
+pub trait Policy: Send {
+    /// Called after every reset with the episode's seed.
+    fn reset(&mut self, seed: u64) {
+        let _ = seed;
+    }
+    /// Writes the action (length: the action space's flat size).
+    fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String>;
+}
+
+struct Zero;
+
+impl Policy for Zero {
+    fn act(&mut self, _: &Env, action: &mut [f32]) -> Result<(), String> {
+        action.fill(0.0);
+        Ok(())
+    }
+}
+
+struct Random {
+    space: Space,
+    rng: EnvRng,
+}
+
+fn sample(space: &Space, rng: &mut EnvRng, out: &mut [f32], k: &mut usize) {
+    match space {
+        Space::Box { low, high, .. } => {
+            for (lo, hi) in low.iter().zip(high) {
+                // Unbounded boxes sample [-1, 1].
+                let (lo, hi) = (lo.max(-1.0), hi.min(1.0));
+                out[*k] = rng.range(f64::from(lo), f64::from(hi)) as f32;
+                *k += 1;
+            }
+        }
+        Space::Discrete { n } => {
+            out[*k] = rng.below(*n) as f32;
+            *k += 1;
+        }
+        Space::Dict(items) => {
+            for (_, s) in items {
+                sample(s, rng, out, k);
+            }
+        }
+    }
+}
+
+impl Policy for Random {
+    fn reset(&mut self, seed: u64) {
+        self.rng = EnvRng::from_seed(seed ^ 0x5eed_0f_7a5c);
+    }
+    fn act(&mut self, _: &Env, action: &mut [f32]) -> Result<(), String> {
+        let mut k = 0;
+        sample(&self.space, &mut self.rng, action, &mut k);
+        Ok(())
+    }
+}
+
+/// Makes a policy for `env`. `scripted` needs a task with an expert that supports the
+/// robot's action modes; errors say which modes it supports.
+pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, String> {
+    match kind {
+        PolicyKind::Zero => Ok(Box::new(Zero)),
+        PolicyKind::Random => Ok(Box::new(Random {
+            space: env.spaces().action,
+            rng: EnvRng::from_seed(0),
+        })),
+        PolicyKind::Scripted => {
+            let task = env
+                .app
+                .world
+                .get_resource::<Task>()
+                .ok_or("--policy scripted: this scene has no task section (no expert)")?;
+            let name = task
+                .model
+                .desc
+                .expert
+                .clone()
+                .ok_or("--policy scripted: the task names no expert")?;
+            let robot = task.model.robot.clone();
+            let rt = robot_of(env, &robot)?;
+            let modes = rt.fixed.modes;
+            if modes.discrete {
+                return Err(format!(
+                    "the {name} expert needs continuous actions (the robot has discrete keys)"
+                ));
+            }
+            match name.as_str() {
+                "place" => {
+                    if !matches!(modes.base, BaseMode::Velocity)
+                        || !matches!(modes.arm, ArmMode::EePoseDelta | ArmMode::EePoseAbsolute)
+                    {
+                        return Err(format!(
+                            "the place expert drives base: Velocity and arm: EePoseDelta or EePoseAbsolute; this run has base {:?}, arm {:?}",
+                            modes.base, modes.arm
+                        ));
+                    }
+                    Ok(Box::new(PlaceExpert { robot }))
+                }
+                other => Err(format!("no scripted expert named \"{other}\"")),
+            }
+        }
+    }
+}
+
+fn robot_of<'a>(env: &'a Env, name: &str) -> Result<&'a RobotRuntime, String> {
+    env.app
+        .world
+        .get_resource::<Robots>()
+        .and_then(|r| r.get(name))
+        .ok_or_else(|| format!("no robot named \"{name}\""))
+}
+
+fn point(env: &Env, name: &str) -> Result<Vector3<f64>, String> {
+    env.app
+        .world
+        .get_resource::<TaskPoints>()
+        .and_then(|p| p.0.get(name).copied())
+        .ok_or_else(|| format!("the task has no point or target named \"{name}\""))
+}
+
+/// Writes the base, arm and gripper parts: a world-frame base velocity (m/s, rad/s), an
+/// end-effector position target in the base frame (orientation held) and the gripper.
+fn write_action(
+    env: &Env,
+    rt: &RobotRuntime,
+    base_world: (Vector2<f64>, f64),
+    ee_base: Vector3<f64>,
+    closed: bool,
+    action: &mut [f32],
+) -> Result<(), String> {
+    let ctx = env.app.world.resource::<RigidContext>();
+    let obs = rt.observe(ctx).map_err(|e| e.to_string())?;
+    let s = env.app.world.resource::<SimSettings>();
+    let dt = s.dt * f64::from(s.decimation);
+    let m = rt.fixed.modes;
+    let mut k = 0;
+    if m.base == BaseMode::Velocity {
+        let (_, _, yaw) = obs.base.rotation.euler_angles();
+        let v = nalgebra::Rotation2::new(-yaw) * base_world.0;
+        // The holonomic base's limits: 0.5 m/s, 0.5 m/s, 1.0 rad/s (SPEC.md).
+        for x in [v.x / 0.5, v.y / 0.5, base_world.1] {
+            action[k] = x.clamp(-1.0, 1.0) as f32;
+            k += 1;
+        }
+    }
+    match m.arm {
+        ArmMode::EePoseDelta => {
+            let d = (ee_base - rt.ee_target.translation.vector) / (m.ee_speed * dt);
+            for i in 0..3 {
+                action[k + i] = d[i].clamp(-1.0, 1.0) as f32;
+            }
+            action[k + 3..k + 6].fill(0.0);
+            k += 6;
+        }
+        ArmMode::EePoseAbsolute => {
+            let r: UnitQuaternion<f64> = rt.ee_target.rotation;
+            let rv = r.scaled_axis();
+            for i in 0..3 {
+                action[k + i] = ee_base[i] as f32;
+                action[k + 3 + i] = rv[i] as f32;
+            }
+            k += 6;
+        }
+        other => return Err(format!("arm mode {other:?} is not driven by this expert")),
+    }
+    if m.gripper == GripperMode::Binary {
+        action[k] = if closed { 1.0 } else { -1.0 };
+    }
+    Ok(())
+}
+
+/// Place: the rod is in the hand from the start. Drive the base (heading held at 0) so that the
+/// rod's free end moves over the table target, while the hand's height is servoed so the end
+/// hangs 8 cm above the table top.
+struct PlaceExpert {
+    robot: String,
+}
+
+impl Policy for PlaceExpert {
+    fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
+        let rt = robot_of(env, &self.robot)?;
+        let end = point(env, "rod_end")?;
+        let table = point(env, "table")?;
+        let ctx = env.app.world.resource::<RigidContext>();
+        let obs = rt.observe(ctx).map_err(|e| e.to_string())?;
+        let (_, _, yaw) = obs.base.rotation.euler_angles();
+        let err = Vector2::new(table.x - end.x, table.y - end.y);
+        let mut v = 1.5 * err;
+        if v.norm() > 0.5 {
+            v *= 0.5 / v.norm();
+        }
+        // Hand: 0.55 m ahead of the base; its height follows the end's height error.
+        let cur = rt.ee_target.translation.vector;
+        let z = (cur.z + 0.5 * (table.z + 0.08 - end.z)).clamp(0.7, 1.25);
+        let ee = Vector3::new(0.55, 0.0, z);
+        // The rod is attached to the hand; the fingers stay open around it (closing them would
+        // squeeze the 7 cm rod).
+        write_action(env, rt, (v, -2.0 * yaw), ee, false, action)
+    }
+}

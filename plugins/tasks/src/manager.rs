@@ -1,0 +1,1079 @@
+//! The task managers in ECS form: the `task` scene section compiles into an immutable
+//! [`TaskModel`]; every env gets a [`Task`] (resolved points) and a [`TaskState`] (stateful:
+//! targets, previous action, observation history, success), and four systems:
+//! - `task_reset` (`EnvSystems::Reset`): reset events (targets, robot start pose, object offsets),
+//!   drawn from the env's RNG;
+//! - `task_evaluate` (`EnvSystems::Evaluate`, before the time limit): rewards (weighted terms,
+//!   optional dt scaling), success (all success terms non-zero: terminated, `success = true`,
+//!   bonus), failure terminations;
+//! - `task_observe` (`EnvSystems::Observe`): observation groups (terms concatenated, scaled,
+//!   clipped, noise, history); the env's observation is the `policy` group, every group is in
+//!   [`TaskObservations`].
+
+use std::collections::{BTreeMap, VecDeque};
+use std::path::Path;
+use std::sync::Arc;
+
+use bevy_ecs::prelude::*;
+use modesuite_engine::components::{DeformableNodes, Object, Pose};
+use modesuite_engine::env::{ActionBuffer, ObservationBuffer, StepSignals};
+use modesuite_engine::registry::{CompiledSection, SceneSection, SectionCompileContext};
+use modesuite_engine::rng::EnvRng;
+use modesuite_engine::scene::SceneError;
+use modesuite_engine::state::{StateHasher, Stateful};
+use modesuite_engine::terms::{world_view, ViewQuery};
+use modesuite_engine::{
+    EngineSystems, EnvSystems, RigidContext, SimApp, SimClock, SimErrors, SimSettings, Space,
+    Spaces,
+};
+use modesuite_fem::FemContext;
+use modesuite_pbd::{Cloth, PbdContext};
+use modesuite_robots::{RobotObservation, Robots};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+use crate::desc::{EventDesc, PointRef, TaskDesc};
+use crate::terms::{tracked_nodes, Configure, Dims, PointId, TaskCtx, TaskTerm, TaskTermEntry};
+
+/// A configured term with its name.
+#[derive(Clone)]
+pub struct NamedTerm {
+    /// Name in the section.
+    pub name: String,
+    /// The term.
+    pub term: Arc<dyn TaskTerm>,
+}
+
+/// A reward term.
+#[derive(Clone)]
+pub struct RewardTerm {
+    /// Name and term.
+    pub term: NamedTerm,
+    /// Weight.
+    pub weight: f64,
+    /// Multiplied by the env step length.
+    pub dt_scaled: bool,
+}
+
+/// An observation term with post-processing.
+#[derive(Clone)]
+pub struct ObsTerm {
+    /// Name (`term` of the entry) and term.
+    pub term: NamedTerm,
+    /// Scale.
+    pub scale: f64,
+    /// Clip range.
+    pub clip: Option<(f64, f64)>,
+}
+
+/// An observation group.
+#[derive(Clone)]
+pub struct Group {
+    /// Name.
+    pub name: String,
+    /// Terms in order.
+    pub terms: Vec<ObsTerm>,
+    /// Uniform noise half-width.
+    pub noise: f64,
+    /// Frames stacked.
+    pub history: usize,
+}
+
+/// A target.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Target {
+    /// Nominal position.
+    pub pos: Vector3<f64>,
+    /// Randomisation half-widths.
+    pub range: Vector3<f64>,
+}
+
+/// A compiled task (immutable, shared by every env).
+pub struct TaskModel {
+    /// The section after `extends` was applied.
+    pub desc: TaskDesc,
+    /// Robot name.
+    pub robot: String,
+    /// Points the terms use.
+    pub points: Vec<PointRef>,
+    /// Target names and values, in index order.
+    pub targets: Vec<(String, Target)>,
+    /// Rewards.
+    pub rewards: Vec<RewardTerm>,
+    /// Success terms.
+    pub success: Vec<NamedTerm>,
+    /// Success bonus.
+    pub success_bonus: f64,
+    /// Failure terminations.
+    pub terminations: Vec<NamedTerm>,
+    /// Observation groups.
+    pub groups: Vec<Group>,
+    /// Reset events in order.
+    pub events: Vec<(String, EventDesc)>,
+    /// Named points and targets with their ids (published in [`TaskPoints`]).
+    pub named: Vec<(String, PointId)>,
+}
+
+impl TaskModel {
+    /// Index of a target.
+    pub fn target_index(&self, name: &str) -> Option<usize> {
+        self.targets.iter().position(|(n, _)| n == name)
+    }
+}
+
+/// A point resolved in one env.
+#[derive(Debug, Clone)]
+enum Resolved {
+    Target(usize),
+    Base,
+    Ee,
+    Object(String),
+    Nodes { object: Entity, nodes: Vec<u32> },
+    Const(Vector3<f64>),
+}
+
+/// The task of one env: the model and the points resolved at spawn (immutable).
+#[derive(Resource, Clone)]
+pub struct Task {
+    /// The compiled task.
+    pub model: Arc<TaskModel>,
+    points: Vec<Resolved>,
+    /// Robot dimensions.
+    pub dims: Dims,
+    /// Arm joints (gripper last) and leg joints, indices into the robot's joints.
+    pub arm_joints: Vec<usize>,
+    /// Leg joint indices.
+    pub leg_joints: Vec<usize>,
+    /// Base height at spawn.
+    pub base_height: f64,
+    /// Cloth objects (name, entity).
+    cloths: Vec<(String, Entity)>,
+}
+
+/// Per-env task state (part of the snapshot).
+#[derive(Resource, Debug, Clone, Default, PartialEq)]
+pub struct TaskState {
+    /// Current target positions.
+    pub targets: Vec<Vector3<f64>>,
+    /// Action of the previous step.
+    pub prev_action: Vec<f32>,
+    /// Per group: the last `history` frames.
+    pub history: Vec<VecDeque<Vec<f32>>>,
+    /// Whether the current episode has succeeded.
+    pub success: bool,
+}
+
+impl Stateful for TaskState {
+    fn save_state(&self) -> Box<dyn std::any::Any + Send + Sync> {
+        Box::new(self.clone())
+    }
+    fn load_state(&mut self, state: &(dyn std::any::Any + Send + Sync)) {
+        if let Some(s) = state.downcast_ref::<TaskState>() {
+            self.clone_from(s);
+        }
+    }
+    fn hash_state(&self, h: &mut StateHasher) {
+        for t in &self.targets {
+            for x in t.iter() {
+                h.write_f64(*x);
+            }
+        }
+        for a in &self.prev_action {
+            h.write_f64(f64::from(*a));
+        }
+        for g in &self.history {
+            for f in g {
+                for x in f {
+                    h.write_f64(f64::from(*x));
+                }
+            }
+        }
+        h.write_u64(u64::from(self.success));
+    }
+}
+
+/// The task's named points and targets after the last step or reset (world, m), for experts,
+/// tests and viewers.
+#[derive(Resource, Debug, Clone, Default)]
+pub struct TaskPoints(pub BTreeMap<String, Vector3<f64>>);
+
+/// Every observation group of the last observation, flat, by group name.
+#[derive(Resource, Debug, Clone, Default)]
+pub struct TaskObservations(pub BTreeMap<String, Vec<f32>>);
+
+/// The `task` scene section.
+pub struct TaskSection;
+
+fn serr(path: &str, value: impl Into<String>, msg: impl Into<String>) -> SceneError {
+    SceneError::semantic(path.to_string(), value.into(), msg.into())
+}
+
+/// Reads `file` (a `*.task.ron` holding one task section) and the files it extends.
+fn load_extends(
+    base_dir: &Path,
+    file: &str,
+    depth: usize,
+    path: &str,
+) -> Result<TaskDesc, SceneError> {
+    if depth > 8 {
+        return Err(serr(path, file, "at most 8 levels of `extends`"));
+    }
+    let full = base_dir.join(file);
+    let text = match full
+        .to_str()
+        .and_then(|f| f.strip_prefix(crate::EMBEDDED_DIR))
+        .map(|f| f.trim_start_matches('/'))
+    {
+        Some(rel) => crate::embedded(rel)
+            .ok_or_else(|| serr(path, file, format!("no embedded file {rel}")))?
+            .to_string(),
+        None => std::fs::read_to_string(&full)
+            .map_err(|e| serr(path, file, format!("cannot read {}: {e}", full.display())))?,
+    };
+    let desc: TaskDesc = crate::ron_options()
+        .from_str(&text)
+        .map_err(|e| serr(path, file, format!("{}:{}", full.display(), e)))?;
+    resolve_extends(desc, full.parent().unwrap_or(base_dir), depth + 1, path)
+}
+
+fn resolve_extends(
+    desc: TaskDesc,
+    base_dir: &Path,
+    depth: usize,
+    path: &str,
+) -> Result<TaskDesc, SceneError> {
+    match desc.extends.clone() {
+        None => Ok(desc),
+        Some(f) => {
+            let parent = load_extends(base_dir, &f, depth, &format!("{path}.extends"))?;
+            Ok(desc.over(parent))
+        }
+    }
+}
+
+fn configure(
+    ctx: &SectionCompileContext,
+    cfg: &mut Configure,
+    path: String,
+    name: &str,
+    params: Option<&ron::value::RawValue>,
+) -> Result<Arc<dyn TaskTerm>, SceneError> {
+    let entry = ctx.registry.terms.get(name).ok_or_else(|| {
+        serr(
+            &path,
+            format!("term: \"{name}\""),
+            format!(
+                "a registered task term: [{}]",
+                ctx.registry
+                    .terms
+                    .iter()
+                    .filter(|(_, e)| e.payload.downcast_ref::<TaskTermEntry>().is_some())
+                    .map(|(n, _)| n.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })?;
+    let f = entry
+        .payload
+        .downcast_ref::<TaskTermEntry>()
+        .ok_or_else(|| {
+            serr(
+            &path,
+            format!("term: \"{name}\""),
+            "a task term (this one is a scene term: use it in the scene's rewards/observations)",
+        )
+        })?;
+    let ron = params.map_or("()", |p| p.get_ron());
+    f.0.configure(ron, cfg)
+        .map_err(|e| serr(&format!("{path}.params"), ron.trim(), e))
+}
+
+impl SceneSection for TaskSection {
+    fn name(&self) -> &str {
+        "task"
+    }
+
+    fn description(&self) -> &str {
+        "a MoDeSuite task: points, targets, rewards, success, terminations, observation groups, reset events"
+    }
+
+    fn compile(&self, ctx: &SectionCompileContext) -> Result<CompiledSection, SceneError> {
+        let path = ctx.path();
+        let desc: TaskDesc = ctx.parse()?;
+        let desc = resolve_extends(desc, &ctx.source.base_dir, 0, &path)?;
+        if let Some(id) = &desc.id {
+            crate::parse_id(id).map_err(|e| serr(&format!("{path}.id"), id.clone(), e))?;
+        }
+        let objects: Vec<String> = ctx.objects.iter().map(|o| o.name.clone()).collect();
+        let mut targets = Vec::new();
+        for (n, t) in &desc.targets {
+            let v = |x: (f64, f64, f64)| Vector3::new(x.0, x.1, x.2);
+            let (pos, range) = (v(t.pos), v(t.range));
+            if !pos.iter().chain(range.iter()).all(|x| x.is_finite()) || range.min() < 0.0 {
+                return Err(serr(
+                    &format!("{path}.targets[\"{n}\"]"),
+                    format!("{t:?}"),
+                    "finite pos and range >= 0",
+                ));
+            }
+            targets.push((n.clone(), Target { pos, range }));
+        }
+        let target_names: Vec<String> = targets.iter().map(|(n, _)| n.clone()).collect();
+        let mut cfg = Configure {
+            named: &desc.points,
+            targets: &target_names,
+            objects: &objects,
+            table: Vec::new(),
+        };
+        let mut named_ids = Vec::new();
+        for (n, p) in &desc.points {
+            let id = cfg
+                .point(p)
+                .map_err(|e| serr(&format!("{path}.points[\"{n}\"]"), format!("{p:?}"), e))?;
+            named_ids.push((n.clone(), id));
+        }
+        for (n, _) in &targets {
+            named_ids.push((
+                n.clone(),
+                cfg.point(&PointRef::Target(n.clone()))
+                    .map_err(|e| serr(&path, n.clone(), e))?,
+            ));
+        }
+        let mut rewards = Vec::new();
+        for (n, r) in &desc.rewards {
+            if !r.weight.is_finite() {
+                return Err(serr(
+                    &format!("{path}.rewards[\"{n}\"].weight"),
+                    r.weight.to_string(),
+                    "a finite weight",
+                ));
+            }
+            let term = configure(
+                ctx,
+                &mut cfg,
+                format!("{path}.rewards[\"{n}\"]"),
+                &r.term,
+                r.params.as_deref(),
+            )?;
+            rewards.push(RewardTerm {
+                term: NamedTerm {
+                    name: n.clone(),
+                    term,
+                },
+                weight: r.weight,
+                dt_scaled: r.dt_scaled,
+            });
+        }
+        let named = |section: &str,
+                     m: &BTreeMap<String, crate::desc::TermDesc>,
+                     cfg: &mut Configure|
+         -> Result<Vec<NamedTerm>, SceneError> {
+            m.iter()
+                .map(|(n, t)| {
+                    Ok(NamedTerm {
+                        name: n.clone(),
+                        term: configure(
+                            ctx,
+                            cfg,
+                            format!("{path}.{section}[\"{n}\"]"),
+                            &t.term,
+                            t.params.as_deref(),
+                        )?,
+                    })
+                })
+                .collect()
+        };
+        let success = named("success", &desc.success, &mut cfg)?;
+        let terminations = named("terminations", &desc.terminations, &mut cfg)?;
+        let mut groups = Vec::new();
+        for (g, gd) in &desc.observations {
+            let gpath = format!("{path}.observations[\"{g}\"]");
+            if gd.history == 0 || gd.history > 64 {
+                return Err(serr(
+                    &format!("{gpath}.history"),
+                    gd.history.to_string(),
+                    "1..=64 frames",
+                ));
+            }
+            if !(gd.noise.is_finite() && gd.noise >= 0.0) {
+                return Err(serr(
+                    &format!("{gpath}.noise"),
+                    gd.noise.to_string(),
+                    "a finite noise >= 0",
+                ));
+            }
+            let mut terms = Vec::new();
+            for (i, t) in gd.terms.iter().enumerate() {
+                let tpath = format!("{gpath}.terms[{i}]");
+                if let Some((lo, hi)) = t.clip {
+                    if !(lo <= hi) {
+                        return Err(serr(
+                            &format!("{tpath}.clip"),
+                            format!("({lo}, {hi})"),
+                            "lo <= hi",
+                        ));
+                    }
+                }
+                if t.scale.is_some_and(|s| !s.is_finite()) {
+                    return Err(serr(
+                        &format!("{tpath}.scale"),
+                        format!("{:?}", t.scale),
+                        "a finite scale",
+                    ));
+                }
+                terms.push(ObsTerm {
+                    term: NamedTerm {
+                        name: t.term.clone(),
+                        term: configure(ctx, &mut cfg, tpath, &t.term, t.params.as_deref())?,
+                    },
+                    scale: t.scale.unwrap_or(1.0),
+                    clip: t.clip,
+                });
+            }
+            groups.push(Group {
+                name: g.clone(),
+                terms,
+                noise: gd.noise,
+                history: gd.history,
+            });
+        }
+        if !desc.observations.is_empty() && !desc.observations.contains_key("policy") {
+            return Err(serr(
+                &format!("{path}.observations"),
+                format!("{:?}", desc.observations.keys().collect::<Vec<_>>()),
+                "a group named \"policy\" (the env's observation)",
+            ));
+        }
+        for (n, e) in &desc.events {
+            let epath = format!("{path}.events[\"{n}\"]");
+            match e {
+                EventDesc::RobotPose { xy, yaw, carry } => {
+                    if !(xy.is_finite() && *xy >= 0.0 && yaw.is_finite() && *yaw >= 0.0) {
+                        return Err(serr(
+                            &epath,
+                            format!("{e:?}"),
+                            "finite xy >= 0 and yaw >= 0",
+                        ));
+                    }
+                    for c in carry {
+                        cfg.object(c)
+                            .map_err(|m| serr(&format!("{epath}.carry"), c.clone(), m))?;
+                    }
+                }
+                EventDesc::ObjectOffset { object, xy } => {
+                    cfg.object(object)
+                        .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+                    if !(xy.is_finite() && *xy >= 0.0) {
+                        return Err(serr(
+                            &format!("{epath}.xy"),
+                            xy.to_string(),
+                            "a finite xy >= 0",
+                        ));
+                    }
+                }
+            }
+        }
+        let points = cfg.table;
+        let success_bonus = desc.success_bonus.unwrap_or(0.0);
+        Ok(Arc::new(TaskModel {
+            named: named_ids,
+            robot: desc.robot.clone().unwrap_or_else(|| "robot".to_string()),
+            events: desc.events.clone().into_iter().collect(),
+            desc,
+            points,
+            targets,
+            rewards,
+            success,
+            success_bonus,
+            terminations,
+            groups,
+        }))
+    }
+
+    fn spawn(&self, app: &mut SimApp, compiled: &CompiledSection) -> Result<(), SceneError> {
+        let model = compiled.clone().downcast::<TaskModel>().map_err(|_| {
+            serr(
+                "extensions[\"task\"]",
+                "(compiled)",
+                "a section compiled by the tasks plugin",
+            )
+        })?;
+        let path = "extensions[\"task\"]";
+        let (dims, arm_joints, leg_joints, base_height) = {
+            let robots = app.world.get_resource::<Robots>();
+            let ctx = app.world.get_resource::<RigidContext>();
+            let (Some(robots), Some(ctx)) = (robots, ctx) else {
+                return Err(serr(
+                    path,
+                    model.robot.clone(),
+                    "a task needs the robots section with its robot",
+                ));
+            };
+            let r = robots.get(&model.robot).ok_or_else(|| {
+                serr(
+                    &format!("{path}.robot"),
+                    model.robot.clone(),
+                    "the name of a robot of the robots section",
+                )
+            })?;
+            let mut arm = r.fixed.arm.clone();
+            arm.push(r.fixed.gripper);
+            let obs = r
+                .observe(ctx)
+                .map_err(|e| serr(path, model.robot.clone(), e.to_string()))?;
+            (
+                Dims {
+                    arm: arm.len(),
+                    legs: r.fixed.legs.len(),
+                },
+                arm,
+                r.fixed.legs.clone(),
+                obs.base.translation.z,
+            )
+        };
+        type Spawned = (Entity, Vec<Vector3<f64>>, Isometry3<f64>);
+        let mut by_name: BTreeMap<String, Spawned> = BTreeMap::new();
+        let mut q = app
+            .world
+            .query::<(Entity, &Object, Option<&DeformableNodes>, Option<&Pose>)>();
+        for (e, o, n, p) in q.iter(&app.world) {
+            by_name.insert(
+                o.name.clone(),
+                (
+                    e,
+                    n.map(|n| n.0.clone()).unwrap_or_default(),
+                    p.map_or(Isometry3::identity(), |p| p.0),
+                ),
+            );
+        }
+        let local = |name: &str| -> Result<(Entity, Vec<Vector3<f64>>), SceneError> {
+            let (e, nodes, pose) = by_name
+                .get(name)
+                .ok_or_else(|| serr(path, name, "a scene object"))?;
+            if nodes.is_empty() {
+                return Err(serr(
+                    path,
+                    name,
+                    "a deformable object (fem.solid, pbd.cloth)",
+                ));
+            }
+            let inv = pose.inverse();
+            Ok((
+                *e,
+                nodes
+                    .iter()
+                    .map(|p| (inv * Point3::from(*p)).coords)
+                    .collect(),
+            ))
+        };
+        let mut points = Vec::new();
+        for p in &model.points {
+            points.push(match p {
+                PointRef::Target(t) => Resolved::Target(model.target_index(t).unwrap_or(0)),
+                PointRef::Base => Resolved::Base,
+                PointRef::Ee => Resolved::Ee,
+                PointRef::Object(o) => Resolved::Object(o.clone()),
+                PointRef::Centroid(o) => {
+                    let (e, l) = local(o)?;
+                    Resolved::Nodes {
+                        object: e,
+                        nodes: (0..l.len() as u32).collect(),
+                    }
+                }
+                PointRef::Nodes { object, select } => {
+                    let (e, l) = local(object)?;
+                    let nodes =
+                        select.select(&format!("{path}.points (object \"{object}\")"), &l)?;
+                    Resolved::Nodes { object: e, nodes }
+                }
+                PointRef::Tracked { object, i, k } => {
+                    let (e, l) = local(object)?;
+                    let n = tracked_nodes(&l, *k);
+                    Resolved::Nodes {
+                        object: e,
+                        nodes: vec![n[*i]],
+                    }
+                }
+                PointRef::Const(c) => Resolved::Const(Vector3::new(c.0, c.1, c.2)),
+                PointRef::Point(_) => return Err(serr(path, format!("{p:?}"), "a resolved point")),
+            });
+        }
+        let cloths: Vec<(String, Entity)> = app
+            .world
+            .get_resource::<PbdContext>()
+            .map(|c| {
+                c.bodies
+                    .iter()
+                    .filter_map(|b| {
+                        by_name
+                            .iter()
+                            .find(|(_, (e, _, _))| *e == b.entity)
+                            .map(|(n, _)| (n.clone(), b.entity))
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        if let Some(h) = &model.desc.held {
+            let hpath = format!("{path}.held");
+            let (e, l) = local(&h.object)?;
+            let nodes = h.select.select(&hpath, &l)?;
+            let robots = app.world.resource::<Robots>();
+            let body = robots
+                .get(&model.robot)
+                .map(|r| r.fixed.gripper_body_id)
+                .ok_or_else(|| serr(&hpath, model.robot.clone(), "a robot"))?;
+            let pose = app
+                .world
+                .resource::<RigidContext>()
+                .body_pose(body)
+                .ok_or_else(|| serr(&hpath, model.robot.clone(), "a robot with a gripper body"))?;
+            let mut fem = app
+                .world
+                .get_resource_mut::<FemContext>()
+                .ok_or_else(|| serr(&hpath, h.object.clone(), "the FEM plugin"))?;
+            let solid = fem.get_mut(e).ok_or_else(|| {
+                serr(
+                    &format!("{hpath}.object"),
+                    h.object.clone(),
+                    "a fem.solid object",
+                )
+            })?;
+            solid
+                .attach_to_body(body, pose, &nodes)
+                .map_err(|er| serr(&hpath, format!("{} nodes", nodes.len()), er.to_string()))?;
+        }
+        let task = Task {
+            model: model.clone(),
+            points,
+            dims,
+            arm_joints,
+            leg_joints,
+            base_height,
+            cloths,
+        };
+        let obs_dim: usize = model
+            .groups
+            .iter()
+            .find(|g| g.name == "policy")
+            .map_or(0, |g| {
+                g.history
+                    * g.terms
+                        .iter()
+                        .map(|t| t.term.term.dim(&dims))
+                        .sum::<usize>()
+            });
+        let state = TaskState {
+            targets: model.targets.iter().map(|(_, t)| t.pos).collect(),
+            prev_action: Vec::new(),
+            history: vec![VecDeque::new(); model.groups.len()],
+            success: false,
+        };
+        app.world.insert_resource(task);
+        app.world.insert_resource(state);
+        app.world.insert_resource(TaskObservations::default());
+        app.world.insert_resource(TaskPoints::default());
+        app.register_stateful::<TaskState>();
+        let mut s = app.world.get_resource_or_insert_with(Spaces::default);
+        if !model.groups.is_empty() {
+            s.observation = Space::unbounded(obs_dim);
+        }
+        Ok(())
+    }
+}
+
+/// Adds the task systems (the section spawns the resources they need).
+pub fn add_task_systems(app: &mut SimApp) {
+    app.add_systems(
+        modesuite_engine::EnvStep,
+        task_reset.in_set(EnvSystems::Reset),
+    );
+    app.add_systems(
+        modesuite_engine::EnvStep,
+        task_evaluate
+            .in_set(EnvSystems::Evaluate)
+            .before(EngineSystems::TimeLimit),
+    );
+    app.add_systems(
+        modesuite_engine::EnvStep,
+        task_observe.in_set(EnvSystems::Observe),
+    );
+}
+
+fn resolve_points(
+    task: &Task,
+    state: &TaskState,
+    robot: &RobotObservation,
+    world: &modesuite_engine::terms::WorldView,
+    nodes: &Query<&DeformableNodes>,
+) -> Result<Vec<Vector3<f64>>, String> {
+    task.points
+        .iter()
+        .map(|p| {
+            Ok(match p {
+                Resolved::Target(i) => state.targets.get(*i).copied().unwrap_or_default(),
+                Resolved::Base => robot.base.translation.vector,
+                Resolved::Ee => robot.ee.translation.vector,
+                Resolved::Object(o) => world
+                    .object(o)
+                    .map(|v| v.pose.translation.vector)
+                    .ok_or_else(|| format!("object \"{o}\" is gone"))?,
+                Resolved::Nodes { object, nodes: idx } => {
+                    let n = nodes
+                        .get(*object)
+                        .map_err(|_| "a deformable object lost its nodes".to_string())?;
+                    let mut c = Vector3::zeros();
+                    for &i in idx {
+                        c += n.0[i as usize];
+                    }
+                    c / idx.len().max(1) as f64
+                }
+                Resolved::Const(c) => *c,
+            })
+        })
+        .collect()
+}
+
+/// Evaluates one term into a fresh buffer, checking its values.
+fn eval(t: &NamedTerm, ctx: &TaskCtx, dims: &Dims, what: &str) -> Result<Vec<f64>, String> {
+    let mut out = vec![0.0; t.term.dim(dims)];
+    t.term
+        .evaluate(ctx, &mut out)
+        .map_err(|e| format!("task {what} \"{}\": {e}", t.name))?;
+    if let Some((i, v)) = out.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(format!(
+            "task {what} \"{}\": value [{i}] = {v} is not finite",
+            t.name
+        ));
+    }
+    Ok(out)
+}
+
+/// Builds the term context and runs `f` with it.
+#[allow(clippy::too_many_arguments)]
+fn with_ctx<R>(
+    task: &Task,
+    state: &TaskState,
+    robots: &Robots,
+    rigid: &RigidContext,
+    view: &ViewQuery,
+    nodes: &Query<&DeformableNodes>,
+    clock: &SimClock,
+    settings: &SimSettings,
+    pbd: Option<&PbdContext>,
+    action: &[f32],
+    f: impl FnOnce(&TaskCtx) -> R,
+) -> Result<R, String> {
+    let world = world_view(view, clock, settings);
+    let robot = robots
+        .get(&task.model.robot)
+        .ok_or_else(|| format!("robot \"{}\" is gone", task.model.robot))?
+        .observe(rigid)
+        .map_err(|e| e.to_string())?;
+    let points = resolve_points(task, state, &robot, &world, nodes)?;
+    let cloths: Vec<(&str, &Cloth)> = match pbd {
+        Some(p) => task
+            .cloths
+            .iter()
+            .filter_map(|(n, e)| p.get(*e).map(|c| (n.as_str(), c)))
+            .collect(),
+        None => Vec::new(),
+    };
+    let zeros = vec![0.0f32; action.len()];
+    let prev = if state.prev_action.len() == action.len() {
+        &state.prev_action[..]
+    } else {
+        &zeros[..]
+    };
+    let ctx = TaskCtx {
+        world: &world,
+        robot: &robot,
+        arm_joints: &task.arm_joints,
+        leg_joints: &task.leg_joints,
+        points: &points,
+        action,
+        prev_action: prev,
+        cloths: &cloths,
+        base_height: task.base_height,
+    };
+    Ok(f(&ctx))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn task_evaluate(
+    task: Option<Res<Task>>,
+    mut state: Option<ResMut<TaskState>>,
+    robots: Option<Res<Robots>>,
+    rigid: Option<Res<RigidContext>>,
+    view: ViewQuery,
+    nodes: Query<&DeformableNodes>,
+    clock: Res<SimClock>,
+    settings: Res<SimSettings>,
+    pbd: Option<Res<PbdContext>>,
+    action: Res<ActionBuffer>,
+    mut signals: ResMut<StepSignals>,
+    mut errors: ResMut<SimErrors>,
+) {
+    let (Some(task), Some(state), Some(robots), Some(rigid)) =
+        (task, state.as_deref_mut(), robots, rigid)
+    else {
+        return;
+    };
+    let step_dt = settings.dt * f64::from(settings.decimation);
+    let dims = task.dims;
+    let m = task.model.clone();
+    let result = with_ctx(
+        &task,
+        state,
+        &robots,
+        &rigid,
+        &view,
+        &nodes,
+        &clock,
+        &settings,
+        pbd.as_deref(),
+        &action.0,
+        |ctx| -> Result<(), String> {
+            for r in &m.rewards {
+                let v = eval(&r.term, ctx, &dims, "reward")?[0];
+                let w = r.weight * if r.dt_scaled { step_dt } else { 1.0 };
+                signals.reward += w * v;
+                *signals
+                    .values
+                    .entry(format!("reward/{}", r.term.name))
+                    .or_default() += w * v;
+            }
+            let mut ok = !m.success.is_empty();
+            for s in &m.success {
+                let v = eval(s, ctx, &dims, "success")?[0];
+                signals.values.insert(format!("success/{}", s.name), v);
+                ok &= v != 0.0;
+            }
+            for t in &m.terminations {
+                let v = eval(t, ctx, &dims, "termination")?[0];
+                signals.values.insert(format!("termination/{}", t.name), v);
+                if v != 0.0 {
+                    signals.terminated = true;
+                }
+            }
+            if !m.success.is_empty() {
+                signals.success = Some(ok);
+                if ok {
+                    signals.terminated = true;
+                    signals.reward += m.success_bonus;
+                    signals
+                        .values
+                        .insert("reward/success_bonus".into(), m.success_bonus);
+                }
+            }
+            Ok(())
+        },
+    );
+    match result.and_then(|r| r) {
+        Ok(()) => {
+            state.success = signals.success == Some(true);
+            state.prev_action.clone_from(&action.0);
+        }
+        Err(e) => errors.raise(e),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn task_observe(
+    task: Option<Res<Task>>,
+    mut state: Option<ResMut<TaskState>>,
+    robots: Option<Res<Robots>>,
+    rigid: Option<Res<RigidContext>>,
+    view: ViewQuery,
+    nodes: Query<&DeformableNodes>,
+    clock: Res<SimClock>,
+    settings: Res<SimSettings>,
+    pbd: Option<Res<PbdContext>>,
+    action: Res<ActionBuffer>,
+    mut rng: ResMut<EnvRng>,
+    mut buffer: ResMut<ObservationBuffer>,
+    mut all: ResMut<TaskObservations>,
+    mut named: ResMut<TaskPoints>,
+    mut errors: ResMut<SimErrors>,
+) {
+    let (Some(task), Some(state), Some(robots), Some(rigid)) =
+        (task, state.as_deref_mut(), robots, rigid)
+    else {
+        return;
+    };
+    let dims = task.dims;
+    let m = task.model.clone();
+    let frames = with_ctx(
+        &task,
+        state,
+        &robots,
+        &rigid,
+        &view,
+        &nodes,
+        &clock,
+        &settings,
+        pbd.as_deref(),
+        &action.0,
+        |ctx| -> Result<Vec<Vec<f32>>, String> {
+            named.0.clear();
+            for (n, id) in &m.named {
+                named.0.insert(n.clone(), ctx.point(*id));
+            }
+            m.groups
+                .iter()
+                .map(|g| {
+                    let mut frame = Vec::new();
+                    for t in &g.terms {
+                        for v in eval(&t.term, ctx, &dims, "observation")? {
+                            let mut x = v * t.scale;
+                            if let Some((lo, hi)) = t.clip {
+                                x = x.clamp(lo, hi);
+                            }
+                            frame.push(x);
+                        }
+                    }
+                    Ok(frame.into_iter().map(|x| x as f32).collect())
+                })
+                .collect()
+        },
+    );
+    let frames = match frames.and_then(|r| r) {
+        Ok(f) => f,
+        Err(e) => {
+            errors.raise(e);
+            return;
+        }
+    };
+    let first = clock.episode_steps == 0;
+    for (k, (g, mut frame)) in m.groups.iter().zip(frames).enumerate() {
+        if g.noise > 0.0 {
+            for x in frame.iter_mut() {
+                *x += rng.range(-g.noise, g.noise) as f32;
+            }
+        }
+        let h = &mut state.history[k];
+        if first {
+            // A new episode starts with its first frame repeated.
+            h.clear();
+            for _ in 1..g.history {
+                h.push_back(frame.clone());
+            }
+        }
+        h.push_back(frame);
+        while h.len() > g.history {
+            h.pop_front();
+        }
+        let flat: Vec<f32> = h.iter().flatten().copied().collect();
+        if g.name == "policy" {
+            buffer.0.clone_from(&flat);
+        }
+        all.0.insert(g.name.clone(), flat);
+    }
+}
+
+/// Rotation about z by `yaw` around `centre`, then translation by `d`.
+fn planar_move(centre: Vector3<f64>, d: Vector3<f64>, yaw: f64) -> Isometry3<f64> {
+    let r = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
+    Isometry3::from_parts(Translation3::from(centre + d), r) * Translation3::from(-centre)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn task_reset(
+    task: Option<Res<Task>>,
+    mut state: Option<ResMut<TaskState>>,
+    robots: Option<Res<Robots>>,
+    mut rigid: Option<ResMut<RigidContext>>,
+    mut rng: ResMut<EnvRng>,
+    mut fem: Option<ResMut<FemContext>>,
+    mut pbd: Option<ResMut<PbdContext>>,
+    mut nodes: Query<(Entity, &Object, &mut DeformableNodes)>,
+    mut errors: ResMut<SimErrors>,
+) {
+    let (Some(task), Some(state), Some(robots), Some(rigid)) =
+        (task, state.as_deref_mut(), robots, rigid.as_deref_mut())
+    else {
+        return;
+    };
+    let m = &task.model;
+    state.success = false;
+    state.prev_action.clear();
+    for h in state.history.iter_mut() {
+        h.clear();
+    }
+    for (i, (_, t)) in m.targets.iter().enumerate() {
+        let mut p = t.pos;
+        for k in 0..3 {
+            if t.range[k] > 0.0 {
+                p[k] += rng.range(-t.range[k], t.range[k]);
+            }
+        }
+        state.targets[i] = p;
+    }
+    // Moves a deformable rigidly (solver and its nodes component).
+    let mut move_object = |name: &str, iso: &Isometry3<f64>| -> Result<(), String> {
+        let Some((e, _, mut n)) = nodes.iter_mut().find(|(_, o, _)| o.name == name) else {
+            return Err(format!("object \"{name}\" is gone"));
+        };
+        let moved: Vec<Vector3<f64>> =
+            n.0.iter()
+                .map(|p| (iso * Point3::from(*p)).coords)
+                .collect();
+        if let Some(s) = fem.as_deref_mut().and_then(|f| f.get_mut(e)) {
+            let vel: Vec<Vector3<f64>> = s.velocities().iter().map(|v| iso.rotation * v).collect();
+            s.set_positions_velocities(&moved, &vel)
+                .map_err(|e| e.to_string())?;
+        } else if let Some(c) = pbd.as_deref_mut().and_then(|p| p.get_mut(e)) {
+            c.set_positions(&moved).map_err(|e| e.to_string())?;
+        } else {
+            return Err(format!(
+                "object \"{name}\" is not a deformable this task can move"
+            ));
+        }
+        n.0 = moved;
+        Ok(())
+    };
+    for (name, e) in &m.events {
+        let r: Result<(), String> = (|| match e {
+            EventDesc::RobotPose { xy, yaw, carry } => {
+                let dx = rng.range(-xy, *xy);
+                let dy = rng.range(-xy, *xy);
+                let dyaw = rng.range(-yaw, *yaw);
+                let rt = robots
+                    .get(&m.robot)
+                    .ok_or_else(|| format!("robot \"{}\" is gone", m.robot))?;
+                let base = rt.fixed.base.ok_or(
+                    "RobotPose needs a holonomic base (virtual x, y, yaw joints); legged bases are not supported yet",
+                )?;
+                let centre = rt
+                    .observe(rigid)
+                    .map_err(|e| e.to_string())?
+                    .base
+                    .translation
+                    .vector;
+                let robot = &rt.fixed.robot;
+                let mut q = robot.joint_positions(rigid).map_err(|e| e.to_string())?;
+                q[base.x] += dx;
+                q[base.y] += dy;
+                q[base.yaw] += dyaw;
+                robot
+                    .set_joint_positions(rigid, &q)
+                    .map_err(|e| e.to_string())?;
+                let iso = planar_move(centre, Vector3::new(dx, dy, 0.0), dyaw);
+                for c in carry {
+                    move_object(c, &iso)?;
+                }
+                Ok(())
+            }
+            EventDesc::ObjectOffset { object, xy } => {
+                let d = Vector3::new(rng.range(-xy, *xy), rng.range(-xy, *xy), 0.0);
+                move_object(
+                    object,
+                    &Isometry3::from_parts(Translation3::from(d), UnitQuaternion::identity()),
+                )
+            }
+        })();
+        if let Err(msg) = r {
+            errors.raise(format!("task event \"{name}\": {msg}"));
+        }
+    }
+    rigid.refresh_queries();
+}

@@ -1,0 +1,611 @@
+//! Task terms: small functions registered by name and configured from RON parameters.
+//!
+//! A [`TaskTermFactory`] is registered in the engine registry ([`register_task_term`]) and
+//! configured once per scene into a [`TaskTerm`]; points it mentions are interned in the
+//! [`Configure`] table and resolved per env at spawn. Every term returns `dim` finite values;
+//! rewards, success and terminations use the first.
+
+use std::sync::Arc;
+
+use modesuite_engine::registry::{TermEntry, TermKind};
+use modesuite_engine::terms::WorldView;
+use modesuite_engine::SimApp;
+use modesuite_pbd::{Cloth, Region};
+use modesuite_robots::RobotObservation;
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::de::DeserializeOwned;
+use serde::Deserialize;
+
+use crate::desc::PointRef;
+
+/// Index of a point in a task's point table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PointId(pub usize);
+
+/// What a term sees when it is configured: the task's names and its point table.
+pub struct Configure<'a> {
+    /// Named points of the section.
+    pub named: &'a std::collections::BTreeMap<String, PointRef>,
+    /// Target names, in index order.
+    pub targets: &'a [String],
+    /// Scene object names.
+    pub objects: &'a [String],
+    /// The point table (terms add their points with [`Configure::point`]).
+    pub table: Vec<PointRef>,
+}
+
+impl Configure<'_> {
+    /// Checks a point reference and interns it; named points are replaced by their definition.
+    pub fn point(&mut self, p: &PointRef) -> Result<PointId, String> {
+        let mut p = p.clone();
+        let mut depth = 0;
+        while let PointRef::Point(name) = p.clone() {
+            p = self.named.get(&name).cloned().ok_or_else(|| {
+                format!(
+                    "Point(\"{name}\"): no such point; the section's points are {:?}",
+                    self.named.keys().collect::<Vec<_>>()
+                )
+            })?;
+            depth += 1;
+            if depth > 16 {
+                return Err(format!(
+                    "Point(\"{name}\"): the points refer to each other in a loop"
+                ));
+            }
+        }
+        match &p {
+            PointRef::Target(t) if !self.targets.contains(t) => {
+                return Err(format!(
+                    "Target(\"{t}\"): no such target; the section's targets are {:?}",
+                    self.targets
+                ))
+            }
+            PointRef::Object(o)
+            | PointRef::Centroid(o)
+            | PointRef::Nodes { object: o, .. }
+            | PointRef::Tracked { object: o, .. }
+                if !self.objects.contains(o) =>
+            {
+                return Err(format!("object \"{o}\" is not in the scene"))
+            }
+            PointRef::Nodes { select, .. } => {
+                select.validate("select").map_err(|e| e.to_string())?
+            }
+            PointRef::Tracked { i, k, .. } if *i >= *k => {
+                return Err(format!("Tracked(i: {i}, k: {k}): i in 0..k"))
+            }
+            PointRef::Const(c) if !(c.0.is_finite() && c.1.is_finite() && c.2.is_finite()) => {
+                return Err(format!("Const({c:?}): finite coordinates"))
+            }
+            _ => {}
+        }
+        if let Some(i) = self.table.iter().position(|q| *q == p) {
+            return Ok(PointId(i));
+        }
+        self.table.push(p);
+        Ok(PointId(self.table.len() - 1))
+    }
+
+    /// Checks that `name` is a scene object.
+    pub fn object(&self, name: &str) -> Result<(), String> {
+        if self.objects.iter().any(|o| o == name) {
+            Ok(())
+        } else {
+            Err(format!("object \"{name}\" is not in the scene"))
+        }
+    }
+}
+
+/// Everything a term reads when it is evaluated (one env, read-only).
+pub struct TaskCtx<'a> {
+    /// Objects, clock.
+    pub world: &'a WorldView<'a>,
+    /// The task robot's state.
+    pub robot: &'a RobotObservation,
+    /// The task robot's arm joint indices (into `robot.q`), gripper last.
+    pub arm_joints: &'a [usize],
+    /// The task robot's leg joint indices.
+    pub leg_joints: &'a [usize],
+    /// Resolved points, by [`PointId`].
+    pub points: &'a [Vector3<f64>],
+    /// The action of this step and of the previous one.
+    pub action: &'a [f32],
+    /// The previous step's action (zeros at the start of an episode).
+    pub prev_action: &'a [f32],
+    /// Cloth objects by name.
+    pub cloths: &'a [(&'a str, &'a Cloth)],
+    /// Nominal base height of the robot (stability terms).
+    pub base_height: f64,
+}
+
+impl TaskCtx<'_> {
+    /// A resolved point.
+    pub fn point(&self, id: PointId) -> Vector3<f64> {
+        self.points[id.0]
+    }
+
+    /// A cloth by object name.
+    pub fn cloth(&self, name: &str) -> Result<&Cloth, String> {
+        self.cloths
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, c)| *c)
+            .ok_or_else(|| format!("object \"{name}\" is not a pbd.cloth"))
+    }
+}
+
+/// Robot facts some terms' sizes depend on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Dims {
+    /// Arm joints including the gripper.
+    pub arm: usize,
+    /// Leg joints.
+    pub legs: usize,
+}
+
+/// A configured term (immutable, shared by every env).
+pub trait TaskTerm: Send + Sync + 'static {
+    /// Number of values for a robot of these dimensions.
+    fn dim(&self, dims: &Dims) -> usize;
+    /// Writes `dim` values.
+    fn evaluate(&self, ctx: &TaskCtx, out: &mut [f64]) -> Result<(), String>;
+}
+
+/// A registered term: validates its parameters and returns the configured term.
+pub trait TaskTermFactory: Send + Sync + 'static {
+    /// Configures from RON parameters (`()` when none were given).
+    fn configure(&self, params: &str, cfg: &mut Configure) -> Result<Arc<dyn TaskTerm>, String>;
+}
+
+/// The registry payload of a task term.
+#[derive(Clone)]
+pub struct TaskTermEntry(pub Arc<dyn TaskTermFactory>);
+
+/// Registers a task term under `name` (shown by `modesuite list`).
+pub fn register_task_term(
+    app: &mut SimApp,
+    name: &str,
+    kind: TermKind,
+    description: &str,
+    factory: Arc<dyn TaskTermFactory>,
+) {
+    app.register_term(TermEntry {
+        name: name.to_string(),
+        kind,
+        description: description.to_string(),
+        payload: Arc::new(TaskTermEntry(factory)),
+    });
+}
+
+fn parse<T: DeserializeOwned>(params: &str) -> Result<T, String> {
+    crate::ron_options()
+        .from_str(params)
+        .map_err(|e| format!("params: {e}"))
+}
+
+/// A term from a closure over parsed parameters.
+struct FnFactory<P, F>(F, std::marker::PhantomData<fn() -> P>);
+
+impl<P, F> TaskTermFactory for FnFactory<P, F>
+where
+    P: DeserializeOwned + 'static,
+    F: Fn(P, &mut Configure) -> Result<Arc<dyn TaskTerm>, String> + Send + Sync + 'static,
+{
+    fn configure(&self, params: &str, cfg: &mut Configure) -> Result<Arc<dyn TaskTerm>, String> {
+        (self.0)(parse::<P>(params)?, cfg)
+    }
+}
+
+fn factory<P, F>(f: F) -> Arc<dyn TaskTermFactory>
+where
+    P: DeserializeOwned + 'static,
+    F: Fn(P, &mut Configure) -> Result<Arc<dyn TaskTerm>, String> + Send + Sync + 'static,
+{
+    Arc::new(FnFactory(f, std::marker::PhantomData))
+}
+
+/// A term from a closure.
+struct Fun<F> {
+    dim: usize,
+    f: F,
+}
+
+impl<F> TaskTerm for Fun<F>
+where
+    F: Fn(&TaskCtx, &mut [f64]) -> Result<(), String> + Send + Sync + 'static,
+{
+    fn dim(&self, _: &Dims) -> usize {
+        self.dim
+    }
+    fn evaluate(&self, ctx: &TaskCtx, out: &mut [f64]) -> Result<(), String> {
+        (self.f)(ctx, out)
+    }
+}
+
+fn term<F>(dim: usize, f: F) -> Arc<dyn TaskTerm>
+where
+    F: Fn(&TaskCtx, &mut [f64]) -> Result<(), String> + Send + Sync + 'static,
+{
+    Arc::new(Fun { dim, f })
+}
+
+/// Vector norm of a distance term.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+pub enum Norm {
+    /// Euclidean.
+    #[default]
+    L2,
+    /// Sum of absolute values (Manhattan).
+    L1,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DistanceParams {
+    a: PointRef,
+    b: PointRef,
+    /// Only x and y.
+    #[serde(default)]
+    planar: bool,
+    #[serde(default)]
+    norm: Norm,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct InBoxParams {
+    point: PointRef,
+    center: PointRef,
+    min: (f64, f64, f64),
+    max: (f64, f64, f64),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PointParams {
+    point: PointRef,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TrackedParams {
+    object: String,
+    #[serde(default = "four")]
+    k: usize,
+}
+
+fn four() -> usize {
+    4
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RegionParams {
+    object: String,
+    min: (f64, f64),
+    max: (f64, f64),
+    /// Only particles higher than this count, m (fraction terms).
+    #[serde(default)]
+    above: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StabilityParams {
+    /// Nominal base height, m (default: the height at spawn).
+    #[serde(default)]
+    height: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Unit {}
+
+/// Tracked points of a deformable: `k` nodes spread uniformly along the longest axis of its
+/// rest shape (the nodes nearest to the axis at `k` stations), in world coordinates.
+pub fn tracked_nodes(rest_local: &[Vector3<f64>], k: usize) -> Vec<u32> {
+    if rest_local.is_empty() || k == 0 {
+        return Vec::new();
+    }
+    let mut lo = rest_local[0];
+    let mut hi = rest_local[0];
+    for p in rest_local {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let ext = hi - lo;
+    let axis = ext.imax();
+    let centre = (lo + hi) / 2.0;
+    (0..k)
+        .map(|i| {
+            let t = if k == 1 {
+                0.5
+            } else {
+                i as f64 / (k - 1) as f64
+            };
+            let mut s = centre;
+            s[axis] = lo[axis] + t * ext[axis];
+            rest_local
+                .iter()
+                .enumerate()
+                .min_by(|(_, a), (_, b)| {
+                    (*a - s).norm_squared().total_cmp(&(*b - s).norm_squared())
+                })
+                .map(|(j, _)| j as u32)
+                .unwrap_or(0)
+        })
+        .collect()
+}
+
+/// Roll and pitch of a pose's rotation, rad.
+pub fn roll_pitch(q: &UnitQuaternion<f64>) -> (f64, f64) {
+    let (r, p, _) = q.euler_angles();
+    (r, p)
+}
+
+/// Registers the term library.
+pub fn register_library(app: &mut SimApp) {
+    use TermKind::*;
+    let reg = |app: &mut SimApp, name: &str, kind: TermKind, d: &str, f| {
+        register_task_term(app, name, kind, d, f)
+    };
+    reg(
+        app,
+        "distance",
+        Reward,
+        "distance between two points (a, b, planar: xy only, norm: L2 | L1), m",
+        factory(|p: DistanceParams, cfg| {
+            let (a, b) = (cfg.point(&p.a)?, cfg.point(&p.b)?);
+            Ok(term(1, move |c, out| {
+                let mut d = c.point(a) - c.point(b);
+                if p.planar {
+                    d.z = 0.0;
+                }
+                out[0] = match p.norm {
+                    Norm::L2 => d.norm(),
+                    Norm::L1 => d.abs().sum(),
+                };
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "in_box",
+        Termination,
+        "1 when point - center lies in [min, max] (axis-aligned, m), else 0",
+        factory(|p: InBoxParams, cfg| {
+            let (a, c0) = (cfg.point(&p.point)?, cfg.point(&p.center)?);
+            let (lo, hi) = (
+                Vector3::new(p.min.0, p.min.1, p.min.2),
+                Vector3::new(p.max.0, p.max.1, p.max.2),
+            );
+            if (0..3).any(|i| !(lo[i] < hi[i])) {
+                return Err(format!(
+                    "min {:?} must be below max {:?} on every axis",
+                    p.min, p.max
+                ));
+            }
+            Ok(term(1, move |c, out| {
+                let d = c.point(a) - c.point(c0);
+                out[0] = f64::from((0..3).all(|i| d[i] > lo[i] && d[i] < hi[i]));
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "point",
+        Observation,
+        "a point's world position (point), 3 values",
+        factory(|p: PointParams, cfg| {
+            let a = cfg.point(&p.point)?;
+            Ok(term(3, move |c, out| {
+                out.copy_from_slice(c.point(a).as_slice());
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "base_xy",
+        Observation,
+        "the robot base's x and y, m",
+        factory(|_: Unit, _| {
+            Ok(term(2, |c, out| {
+                out[0] = c.robot.base.translation.x;
+                out[1] = c.robot.base.translation.y;
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "base_quat",
+        Observation,
+        "the robot base's orientation quaternion (w, x, y, z)",
+        factory(|_: Unit, _| {
+            Ok(term(4, |c, out| {
+                let q = c.robot.base.rotation;
+                out.copy_from_slice(&[q.w, q.i, q.j, q.k]);
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "arm_joints",
+        Observation,
+        "arm joint positions with the gripper last, then their velocities (2 x (n + 1))",
+        factory(|_: Unit, _| Ok(Arc::new(ArmJoints) as Arc<dyn TaskTerm>)),
+    );
+    reg(
+        app,
+        "leg_joints",
+        Observation,
+        "leg joint positions then velocities (24 for Spot, 0 for a wheeled base)",
+        factory(|_: Unit, _| Ok(Arc::new(LegJoints) as Arc<dyn TaskTerm>)),
+    );
+    reg(
+        app,
+        "tracked",
+        Observation,
+        "k tracked nodes of a deformable along its length (object, k = 4), 3 k values",
+        factory(|p: TrackedParams, cfg| {
+            cfg.object(&p.object)?;
+            if p.k == 0 || p.k > 10_000 {
+                return Err(format!("k = {}: 1..=10000 tracked points", p.k));
+            }
+            let ids: Vec<PointId> = (0..p.k)
+                .map(|i| {
+                    cfg.point(&PointRef::Tracked {
+                        object: p.object.clone(),
+                        i,
+                        k: p.k,
+                    })
+                })
+                .collect::<Result<_, _>>()?;
+            Ok(term(3 * p.k, move |c, out| {
+                for (i, id) in ids.iter().enumerate() {
+                    out[3 * i..3 * i + 3].copy_from_slice(c.point(*id).as_slice());
+                }
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "stability",
+        Reward,
+        "base roll^2 + pitch^2 + (height - nominal)^2 (height: nominal, default at spawn)",
+        factory(|p: StabilityParams, _| {
+            Ok(term(1, move |c, out| {
+                let (r, pi) = roll_pitch(&c.robot.base.rotation);
+                let h = c.robot.base.translation.z - p.height.unwrap_or(c.base_height);
+                out[0] = r * r + pi * pi + h * h;
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "action_l2",
+        Reward,
+        "sum of squared action values",
+        factory(|_: Unit, _| {
+            Ok(term(1, |c, out| {
+                out[0] = c.action.iter().map(|a| f64::from(*a).powi(2)).sum();
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "action_rate",
+        Reward,
+        "sum of squared changes of the action since the previous step",
+        factory(|_: Unit, _| {
+            Ok(term(1, |c, out| {
+                out[0] = c
+                    .action
+                    .iter()
+                    .zip(c.prev_action)
+                    .map(|(a, b)| f64::from(a - b).powi(2))
+                    .sum();
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "cloth_fraction_above",
+        Termination,
+        "fraction of a cloth's particles over the xy rectangle [min, max] (and higher than `above`)",
+        factory(|p: RegionParams, cfg| {
+            cfg.object(&p.object)?;
+            let region = region(&p)?;
+            let above = p.above.unwrap_or(f64::NEG_INFINITY);
+            Ok(term(1, move |c, out| {
+                let pos = c.cloth(&p.object)?.positions();
+                let k = pos
+                    .iter()
+                    .filter(|q| region.contains_xy(q) && q.z > above)
+                    .count();
+                out[0] = k as f64 / pos.len().max(1) as f64;
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "cloth_coverage",
+        Termination,
+        "fraction of the xy rectangle [min, max] covered by a cloth's xy projection",
+        factory(|p: RegionParams, cfg| {
+            cfg.object(&p.object)?;
+            let region = region(&p)?;
+            Ok(term(1, move |c, out| {
+                let cloth = c.cloth(&p.object)?;
+                out[0] = cloth.covered_area(&region, 40) / region.area();
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "time",
+        Observation,
+        "simulated time since the episode started, s",
+        factory(|_: Unit, _| {
+            Ok(term(1, |c, out| {
+                out[0] = c.world.time;
+                Ok(())
+            }))
+        }),
+    );
+}
+
+fn region(p: &RegionParams) -> Result<Region, String> {
+    if !(p.min.0 < p.max.0 && p.min.1 < p.max.1) {
+        return Err(format!(
+            "min {:?} max {:?}: min below max on x and y",
+            p.min, p.max
+        ));
+    }
+    Ok(Region {
+        min: [p.min.0, p.min.1],
+        max: [p.max.0, p.max.1],
+    })
+}
+
+struct ArmJoints;
+
+impl TaskTerm for ArmJoints {
+    fn dim(&self, d: &Dims) -> usize {
+        2 * d.arm
+    }
+    fn evaluate(&self, c: &TaskCtx, out: &mut [f64]) -> Result<(), String> {
+        let n = c.arm_joints.len();
+        for (i, &j) in c.arm_joints.iter().enumerate() {
+            out[i] = c.robot.q[j];
+            out[n + i] = c.robot.qd[j];
+        }
+        Ok(())
+    }
+}
+
+struct LegJoints;
+
+impl TaskTerm for LegJoints {
+    fn dim(&self, d: &Dims) -> usize {
+        2 * d.legs
+    }
+    fn evaluate(&self, c: &TaskCtx, out: &mut [f64]) -> Result<(), String> {
+        let n = c.leg_joints.len();
+        for (i, &j) in c.leg_joints.iter().enumerate() {
+            out[i] = c.robot.q[j];
+            out[n + i] = c.robot.qd[j];
+        }
+        Ok(())
+    }
+}
