@@ -482,7 +482,7 @@ pub fn load_target(target: &str) -> Result<(SceneDesc, SceneSource), CliError> {
 }
 
 /// Replaces the `actions` of the first robot of the scene's `robots` section with `ron`.
-fn override_actions(desc: &mut SceneDesc, ron_text: &str) -> Result<(), CliError> {
+pub fn override_actions(desc: &mut SceneDesc, ron_text: &str) -> Result<(), CliError> {
     let bad = |m: &str| CliError::input(format!("--actions {ron_text}: {m}"));
     modesuite_robots::ActionConfig::parse_ron(ron_text).map_err(|e| bad(&e))?;
     let raw = desc

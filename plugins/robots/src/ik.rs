@@ -8,7 +8,7 @@
 //! attempts start from deterministic offsets of the seed and the best attempt is returned.
 //! Nothing in the physics state changes: the solution is returned as joint positions.
 
-use modesuite_engine::deps::nalgebra::Isometry3;
+use modesuite_engine::deps::nalgebra::{Isometry3, UnitQuaternion};
 use modesuite_engine::deps::rapier3d::math::DVector;
 use modesuite_engine::deps::rapier3d::prelude::{InverseKinematicsOption, JointAxesMask};
 use modesuite_engine::math::{pose_from_rapier, pose_to_rapier};
@@ -141,8 +141,17 @@ pub fn solve_ik(
         .iter()
         .map(|&j| robot.bodies[robot.joints[j].body].handle)
         .collect();
-    // Target pose of the body that carries the frame.
-    let body_target = pose_to_rapier(&(target * f.offset.inverse()));
+    // Target pose of the body that carries the frame, its quaternion on the same hemisphere as
+    // the body's current one: q and -q are the same rotation, but rapier's IK error takes the
+    // angle of `target * current^-1` as is, so an opposite sign reads as a turn of nearly 2 pi
+    // (a target built from a rotation vector, w >= 0, sent the arm away from a pose with w < 0).
+    let mut body_target_iso = target * f.offset.inverse();
+    let now = robot.body_pose(ctx, f.body)?;
+    if now.rotation.coords.dot(&body_target_iso.rotation.coords) < 0.0 {
+        body_target_iso.rotation =
+            UnitQuaternion::new_unchecked(-body_target_iso.rotation.into_inner());
+    }
+    let body_target = pose_to_rapier(&body_target_iso);
     let step = InverseKinematicsOption {
         damping: options.damping as f32,
         max_iters: 1,

@@ -226,10 +226,19 @@ impl Policy for PlaceExpert {
         if v.norm() > 0.5 {
             v *= 0.5 / v.norm();
         }
-        // Hand: 0.55 m ahead of the base; its height follows the end's height error.
+        // Hand: 0.55 m ahead of the base; its height follows the end's height error at up to
+        // 0.25 m/s (an integrator on the target, rate-limited so it cannot wind up ahead of the
+        // arm in the absolute mode).
+        let s = env.app.world.resource::<SimSettings>();
+        let dt = s.dt * f64::from(s.decimation);
         let cur = rt.ee_target.translation.vector;
-        let z = (cur.z + 0.5 * (table.z + 0.08 - end.z)).clamp(0.7, 1.25);
-        let ee = Vector3::new(0.55, 0.0, z);
+        let dz = (3.0 * (table.z + 0.08 - end.z)).clamp(-0.25, 0.25) * dt;
+        let step = |from: f64, to: f64| from + (to - from).clamp(-0.25 * dt, 0.25 * dt);
+        let ee = Vector3::new(
+            step(cur.x, 0.55),
+            step(cur.y, 0.0),
+            (cur.z + dz).clamp(0.4, 1.25),
+        );
         // The rod is attached to the hand; the fingers stay open around it (closing them would
         // squeeze the 7 cm rod).
         write_action(env, rt, (v, -2.0 * yaw), ee, false, action)
