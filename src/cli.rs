@@ -160,6 +160,12 @@ pub struct CliError {
     pub code: i32,
 }
 
+impl std::fmt::Display for CliError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
 impl CliError {
     fn input(message: impl Into<String>) -> Self {
         Self {

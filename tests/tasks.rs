@@ -1,0 +1,308 @@
+//! The MoDeSuite task environments: spaces, action modes, success and rewards on constructed
+//! states, reset randomisation, episode ends, the scripted expert, and task-section errors.
+
+use modesuite::engine::scene::{SceneDesc, SceneSource};
+use modesuite::engine::{Env, RigidContext, Space};
+use modesuite::robots::Robots;
+use modesuite::tasks::{make_policy, PolicyKind, TaskPoints, TaskState};
+use nalgebra::Vector3;
+
+const PLACE: &str = "MoDe-Franka-Place-v0";
+
+fn load(id: &str, actions: Option<&str>) -> (SceneDesc, SceneSource) {
+    let (mut desc, source) = modesuite::cli::load_target(id).unwrap_or_else(|e| panic!("{e}"));
+    if let Some(a) = actions {
+        modesuite::cli::override_actions(&mut desc, a).unwrap_or_else(|e| panic!("{e}"));
+    }
+    (desc, source)
+}
+
+fn make(id: &str, actions: Option<&str>) -> Env {
+    let (desc, source) = load(id, actions);
+    let mut app = modesuite::cli::default_app();
+    let model = app
+        .compile_scene(&desc, &source)
+        .unwrap_or_else(|e| panic!("{e}"));
+    app.spawn_scene(model).unwrap_or_else(|e| panic!("{e}"));
+    let mut env = Env::new(app);
+    env.reset(Some(0));
+    env
+}
+
+fn point(env: &Env, name: &str) -> Vector3<f64> {
+    env.app.world.resource::<TaskPoints>().0[name]
+}
+
+fn base(env: &Env) -> nalgebra::Isometry3<f64> {
+    let r = &env.app.world.resource::<Robots>().robots[0];
+    r.observe(env.app.world.resource::<RigidContext>())
+        .unwrap()
+        .base
+}
+
+fn scene_error(text: &str) -> String {
+    let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
+    let mut app = modesuite::cli::default_app();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
+    match app
+        .compile_scene(&desc, &SceneSource::in_memory(dir))
+        .and_then(|m| app.spawn_scene(m))
+    {
+        Ok(_) => panic!("the scene compiled and spawned: {text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn ids_resolve_and_unimplemented_ones_say_so() {
+    let ids = modesuite::tasks::all_ids();
+    assert_eq!(ids.len(), 16);
+    for id in &ids {
+        let r = modesuite::cli::load_target(id);
+        if modesuite::tasks::IMPLEMENTED.contains(&id.as_str()) {
+            assert!(r.is_ok(), "{id}");
+        } else {
+            let e = r.err().unwrap().to_string();
+            assert!(e.contains("not implemented yet"), "{id}: {e}");
+        }
+    }
+    let e = modesuite::cli::load_target("MoDe-Franka-Plase-v0")
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("Place") && e.contains("Franka"), "{e}");
+}
+
+#[test]
+fn place_spaces_match_the_documented_layout() {
+    let env = make(PLACE, None);
+    let s = env.spaces();
+    // docs/tasks.md: base xy 2 + quaternion 4 + (7 arm + gripper) x 2 + 4 tracked x 3 + 3 targets x 3.
+    assert_eq!(s.observation.flat_dim(), 2 + 4 + 16 + 12 + 9);
+    match &s.action {
+        Space::Dict(items) => {
+            let dims: Vec<(&str, usize)> = items
+                .iter()
+                .map(|(n, s)| (n.as_str(), s.flat_dim()))
+                .collect();
+            assert_eq!(dims, [("robot/base", 3), ("robot/arm", 6)]);
+        }
+        other => panic!("{other:?}"),
+    }
+    let o = env.observation();
+    let b = base(&env);
+    assert_eq!(o.len(), 43);
+    assert!((f64::from(o[0]) - b.translation.x).abs() < 1e-6);
+    let table = point(&env, "table");
+    assert!((f64::from(o[34]) - table.x).abs() < 1e-6 && (f64::from(o[36]) - table.z).abs() < 1e-6);
+}
+
+#[test]
+fn every_action_mode_resets_and_steps() {
+    let modes = [
+        ("(base: Velocity, arm: EePoseDelta, gripper: Off)", 9),
+        ("(base: Velocity, arm: EePoseAbsolute, gripper: Binary)", 10),
+        ("(base: Velocity, arm: JointDelta, gripper: Binary)", 11),
+        ("(base: Velocity, arm: JointPosition, gripper: Off)", 10),
+        ("(base: Off, arm: Off, gripper: Binary)", 1),
+        ("(discrete: true)", 1),
+    ];
+    for (m, dim) in modes {
+        let mut env = make(PLACE, Some(m));
+        assert_eq!(env.spaces().action.flat_dim(), dim, "{m}");
+        let mut policy = make_policy(PolicyKind::Random, &env).unwrap();
+        policy.reset(3);
+        let mut a = vec![0.0; dim];
+        for _ in 0..20 {
+            policy.act(&env, &mut a).unwrap();
+            let o = env.step(&a);
+            assert!(o.info.error.is_none(), "{m}: {:?}", o.info.error);
+            assert_eq!(o.observation.len(), 43);
+        }
+        env.reset(Some(1));
+    }
+}
+
+#[test]
+fn success_is_detected_on_constructed_states_and_near_misses_are_not() {
+    // Put the table target where the rod end is (minus 5 cm in z): the end is inside the box.
+    // Then 0.60 m away in x (the box is +-0.56 m): a near miss.
+    for (dx, expect) in [(0.0, true), (0.45, true), (0.60, false), (-0.62, false)] {
+        let mut env = make(PLACE, None);
+        let end = point(&env, "rod_end");
+        env.app.world.resource_mut::<TaskState>().targets[0] = end + Vector3::new(-dx, 0.0, -0.05);
+        let o = env.step(&[0.0; 9]);
+        println!(
+            "target {dx:+.2} m from the rod end: success {:?}",
+            o.info.success
+        );
+        assert_eq!(o.info.success, Some(expect), "dx {dx}");
+        assert_eq!(o.terminated, expect);
+        if expect {
+            assert!(o.info.values["reward/success_bonus"] == 20.0);
+        }
+    }
+}
+
+#[test]
+fn the_reward_is_the_hand_computed_distance_sum() {
+    let mut env = make(PLACE, None);
+    for _ in 0..5 {
+        let o = env.step(&[0.3, -0.2, 0.1, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0]);
+        let end = point(&env, "rod_end");
+        let t = point(&env, "table");
+        let b = base(&env).translation.vector;
+        let hand = -((end - t).norm() + ((b - t).xy()).norm());
+        println!("reward {:.6} hand-computed {hand:.6}", o.reward);
+        assert!((o.reward - hand).abs() < 1e-9);
+        assert!((o.info.values["reward/end_to_target"] + (end - t).norm()).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn reset_randomisation_stays_in_range_and_is_deterministic_per_seed() {
+    let mut env = make(PLACE, None);
+    let mut seen = Vec::new();
+    for seed in 0..12u64 {
+        env.reset(Some(seed));
+        let t = point(&env, "table");
+        let b = base(&env);
+        let (_, _, yaw) = b.rotation.euler_angles();
+        assert!((t.x - 1.5).abs() <= 0.05 && (t.y - 1.5).abs() <= 0.05 && t.z == 0.83);
+        assert!(b.translation.x.abs() <= 0.1 + 1e-9 && b.translation.y.abs() <= 0.1 + 1e-9);
+        assert!(yaw.abs() <= 0.1 + 1e-9);
+        // The rod moved with the base: its held end is still at the hand.
+        let end = point(&env, "rod_end");
+        let d = (end - b.translation.vector).xy().norm();
+        assert!((d - 1.30).abs() < 0.02, "rod end {d:.3} m from the base");
+        seen.push((seed, env.state_hash(), t.x));
+    }
+    let again: Vec<u64> = (0..12u64)
+        .map(|s| {
+            env.reset(Some(s));
+            env.state_hash()
+        })
+        .collect();
+    assert_eq!(again, seen.iter().map(|s| s.1).collect::<Vec<_>>());
+    let distinct: std::collections::BTreeSet<u64> = seen.iter().map(|s| s.1).collect();
+    assert_eq!(distinct.len(), 12, "every seed gives its own start");
+}
+
+#[test]
+fn an_episode_ends_on_success_or_time_out_with_the_right_flags() {
+    let mut env = make(PLACE, None);
+    let mut expert = make_policy(PolicyKind::Scripted, &env).unwrap();
+    let mut a = vec![0.0; 9];
+    let mut ended = None;
+    for i in 0..600 {
+        expert.act(&env, &mut a).unwrap();
+        let o = env.step(&a);
+        if o.terminated || o.truncated {
+            ended = Some((i + 1, o));
+            break;
+        }
+    }
+    let (n, o) = ended.expect("the expert's episode ends");
+    let fi = o.info.final_info.as_ref().expect("same-step autoreset");
+    println!("expert episode: {n} steps, return {:?}", o.info.episode);
+    assert!(o.terminated && !o.truncated && fi.success == Some(true));
+    assert!(n < 600);
+    // The zero action never succeeds: the episode is cut at 600 steps.
+    env.reset(Some(0));
+    let mut last = None;
+    for _ in 0..600 {
+        last = Some(env.step(&[0.0; 9]));
+    }
+    let o = last.unwrap();
+    assert!(o.truncated && !o.terminated);
+    assert_eq!(o.info.episode.unwrap().length, 600);
+    assert_eq!(o.info.final_info.unwrap().success, Some(false));
+}
+
+#[test]
+fn the_place_expert_succeeds_on_several_seeds() {
+    let mut env = make(PLACE, None);
+    let mut expert = make_policy(PolicyKind::Scripted, &env).unwrap();
+    let mut a = vec![0.0; 9];
+    let mut wins = 0;
+    let seeds = [0u64, 7, 13, 21];
+    for seed in seeds {
+        env.reset(Some(seed));
+        expert.reset(seed);
+        for _ in 0..600 {
+            expert.act(&env, &mut a).unwrap();
+            let o = env.step(&a);
+            if o.terminated || o.truncated {
+                let s = o.info.final_info.unwrap().success;
+                println!(
+                    "seed {seed}: success {s:?}, {} steps",
+                    o.info.episode.unwrap().length
+                );
+                wins += usize::from(s == Some(true));
+                break;
+            }
+        }
+    }
+    assert_eq!(wins, seeds.len());
+}
+
+#[test]
+fn task_section_errors_name_the_entry() {
+    let scene = |task: &str| {
+        std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place/franka.scene.ron"),
+        )
+        .unwrap()
+        .replace(
+            r#"events: {"robot_start": RobotPose(xy: 0.1, yaw: 0.1, carry: ["rod"])},"#,
+            task,
+        )
+    };
+    let e = scene_error(&scene(
+        r#"rewards: {"x": (term: "distanse", weight: 1.0, params: (a: Base, b: Ee))},"#,
+    ));
+    assert!(
+        e.contains(r#"rewards["x"]"#) && e.contains("distance"),
+        "{e}"
+    );
+    let e = scene_error(&scene(
+        r#"rewards: {"x": (term: "distance", weight: 1.0, params: (a: Point("nope"), b: Ee))},"#,
+    ));
+    assert!(e.contains("nope") && e.contains("rod_end"), "{e}");
+    let e = scene_error(&scene(
+        r#"observations: {"policy": (terms: [(term: "base_xy")], history: 0)},"#,
+    ));
+    assert!(e.contains(r#"observations["policy"].history"#), "{e}");
+    let e = scene_error(&scene(
+        r#"observations: {"policy": (terms: [(term: "tracked", params: (object: "table", k: 4))])},"#,
+    ));
+    assert!(e.contains("table") && e.contains("deformable"), "{e}");
+    let e = scene_error(&scene(r#"events: {"e": RobotPose(xy: -1.0, yaw: 0.1)},"#));
+    assert!(e.contains(r#"events["e"]"#), "{e}");
+    // An override of the parent's reward by name.
+    let desc = modesuite::engine::scene::parse_str(
+        &scene(r#"rewards: {"base_to_target": (term: "distance", weight: -0.5, params: (a: Base, b: Target("table"), planar: true))},"#),
+        "<test>",
+    )
+    .unwrap();
+    let mut app = modesuite::cli::default_app();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
+    let model = app
+        .compile_scene(&desc, &SceneSource::in_memory(dir))
+        .unwrap();
+    app.spawn_scene(model).unwrap();
+    let task = app.world.resource::<modesuite::tasks::Task>();
+    let w: Vec<(String, f64)> = task
+        .model
+        .rewards
+        .iter()
+        .map(|r| (r.term.name.clone(), r.weight))
+        .collect();
+    assert_eq!(
+        w,
+        [
+            ("base_to_target".to_string(), -0.5),
+            ("end_to_target".to_string(), -1.0)
+        ]
+    );
+}
