@@ -233,6 +233,59 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     Ok(out)
 }
 
+/// Task cases, one per implemented environment id (the other ids are not implemented yet): the
+/// env with its state observation and the zero action, `ID` (1 env, 1 thread) and `ID_x16` (16
+/// envs stepped by a `VecEnv`, one thread and all threads). Extra keys: `task`, `overhead`
+/// (x16 on one thread: per-env time over the single env's, minus 1; 0.10 = 10 % slower per env).
+pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
+    let mut out = Vec::new();
+    for id in modesuite_tasks::IMPLEMENTED {
+        let make = || -> Result<modesuite_engine::Env, String> {
+            let mut e = crate::cli::env_for_target(id, None).map_err(|e| format!("{id}: {e}"))?;
+            e.reset(Some(0));
+            Ok(e)
+        };
+        let mut env = make()?;
+        let zero = vec![0.0f32; env.spaces().action.flat_dim()];
+        let n = steps(600.0, opts);
+        let t = Instant::now();
+        for _ in 0..n {
+            if let Some(e) = env.step(&zero).info.error {
+                return Err(format!("{id}: {e}"));
+            }
+        }
+        let single = n as f64 / t.elapsed().as_secs_f64();
+        let mut extra = BTreeMap::new();
+        extra.insert("task".into(), json!(id));
+        out.push(BenchRecord::new(id, single, 1, 1, extra));
+        let m = steps(150.0, opts);
+        for threads in thread_counts(opts)? {
+            let envs = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
+            let mut venv =
+                modesuite_engine::VecEnv::new(envs, threads).map_err(|e| e.to_string())?;
+            let actions = vec![0.0f32; 16 * zero.len()];
+            let t = Instant::now();
+            for _ in 0..m {
+                venv.step(&actions).map_err(|e| e.to_string())?;
+            }
+            let sps = (16 * m) as f64 / t.elapsed().as_secs_f64();
+            let mut extra = BTreeMap::new();
+            extra.insert("task".into(), json!(id));
+            if threads == 1 {
+                extra.insert("overhead".into(), json!(single / sps - 1.0));
+            }
+            out.push(BenchRecord::new(
+                &format!("{id}_x16"),
+                sps,
+                threads,
+                16,
+                extra,
+            ));
+        }
+    }
+    Ok(out)
+}
+
 /// The scene of the render suite (embedded, so the suite runs from any folder).
 pub const RENDER_BENCH_SCENE: &str = include_str!("../scenes/examples/tabletop_cameras.scene.ron");
 

@@ -149,6 +149,13 @@ pub struct ViewArgs {
     /// Start paused.
     #[arg(long)]
     pub paused: bool,
+    /// Action modes of the (first) robot, RON, replacing the scene's; `(discrete: true)` gives
+    /// the 14 teleoperation keys to any robot scene or task.
+    #[arg(long)]
+    pub actions: Option<String>,
+    /// Write the state when the viewer closes (modesuite.state.v1 JSON, as `run --dump-state`).
+    #[arg(long)]
+    pub dump_state: Option<PathBuf>,
 }
 
 /// A CLI failure: the message and the exit code (2 = bad input, 1 = runtime failure).
@@ -206,6 +213,19 @@ pub fn env_from_text(text: &str) -> Result<Env, SceneError> {
     let desc = modesuite_engine::scene::parse_str(text, "<memory>")?;
     let mut app = default_app();
     let model = app.compile_scene(&desc, &SceneSource::in_memory("."))?;
+    app.spawn_scene(model)?;
+    Ok(Env::new(app))
+}
+
+/// An env (default plugins, not yet reset) of a scene file or task id, with optional action
+/// modes replacing the first robot's (see `run --actions`).
+pub fn env_for_target(target: &str, actions: Option<&str>) -> Result<Env, CliError> {
+    let (mut desc, source) = load_target(target)?;
+    if let Some(a) = actions {
+        override_actions(&mut desc, a)?;
+    }
+    let mut app = default_app();
+    let model = app.compile_scene(&desc, &source)?;
     app.spawn_scene(model)?;
     Ok(Env::new(app))
 }
@@ -694,7 +714,10 @@ impl Recorder {
 
 fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let size = parse_size("--size", &args.size)?;
-    let (desc, source) = load_target(&args.target)?;
+    let (mut desc, source) = load_target(&args.target)?;
+    if let Some(a) = &args.actions {
+        override_actions(&mut desc, a)?;
+    }
     let mut app = default_app();
     let model = app.compile_scene(&desc, &source)?;
     RenderConfig::from_scene(&model)?;
@@ -708,7 +731,15 @@ fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
         size,
         paused: args.paused,
     };
-    let summary = modesuite_render::viewer::run_viewer(env, opts).map_err(render_err)?;
+    let (summary, mut env) = modesuite_render::viewer::run_viewer(env, opts).map_err(render_err)?;
+    if let Some(path) = &args.dump_state {
+        let length = env
+            .app
+            .world
+            .resource::<modesuite_engine::SimClock>()
+            .episode_steps;
+        dump_final(&mut env, &args.target, args.seed, length, path)?;
+    }
     writeln!(
         out,
         "viewer closed: {} env steps, {} frames, {} teleoperation actions, {} screenshots{}",
@@ -836,7 +867,7 @@ fn run_scene(
         // The last dumped state is the state after the final step (before any autoreset).
         if ep + 1 == args.episodes {
             if let Some(path) = &args.dump_state {
-                dump_final(&mut env, args, seed, length, path)?;
+                dump_final(&mut env, &args.target, seed, length, path)?;
             }
         }
         let wall = t.elapsed().as_secs_f64();
@@ -914,13 +945,13 @@ fn run_scene(
 
 fn dump_final(
     env: &mut Env,
-    args: &RunArgs,
+    target: &str,
     seed: u64,
     length: u64,
     path: &Path,
 ) -> Result<(), CliError> {
     let mut v = modesuite_engine::dump::dump_state(&env.app.world);
-    v["scene"] = json!(args.target);
+    v["scene"] = json!(target);
     v["seed"] = json!(seed);
     v["episode_length"] = json!(length);
     let text =
@@ -948,14 +979,10 @@ fn bench(
         "pbd" => crate::benches::pbd_cases(&opts).map_err(CliError::runtime)?,
         "robots" => crate::benches::robots_cases(&opts).map_err(CliError::runtime)?,
         "render" => crate::benches::render_cases(&opts).map_err(CliError::runtime)?,
-        "tasks" => {
-            return Err(CliError::input(format!(
-                "bench {name}: not implemented yet (arrives with the {name} plugin); available: engine, fem, pbd, robots, render"
-            )))
-        }
+        "tasks" => crate::benches::tasks_cases(&opts).map_err(CliError::runtime)?,
         other => {
             return Err(CliError::input(format!(
-                "bench {other}: unknown suite; available: engine, fem, pbd, robots, render"
+                "bench {other}: unknown suite; available: engine, fem, pbd, robots, render, tasks"
             )))
         }
     };

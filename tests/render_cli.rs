@@ -288,7 +288,9 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
     let mut viewer = modesuite()
         .args([
             "view",
-            "scenes/examples/drop.scene.ron",
+            "MoDe-Franka-Place-v0",
+            "--actions",
+            "(discrete: true)",
             "--size",
             "320x240",
             "--paused",
@@ -297,6 +299,8 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
             "--record",
         ])
         .arg(&record)
+        .arg("--dump-state")
+        .arg(dir.join("final.json"))
         .arg("--screenshot-dir")
         .arg(&dir)
         .env("DISPLAY", &display.name)
@@ -344,11 +348,14 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
     }
     std::thread::sleep(Duration::from_secs(2));
     let before = (0..).take_while(|i| shot(*i).exists()).count();
-    // Orbit the camera, issue two teleoperation actions, take another screenshot.
+    // Orbit the camera, issue teleoperation actions (a discrete env steps once per key: grasp,
+    // then twenty steps forward), take another screenshot.
     key("Left");
     key("Left");
     key("g");
-    key("w");
+    for _ in 0..20 {
+        key("w");
+    }
     key("p");
     assert!(
         wait_for(Duration::from_secs(60), || shot(before).exists()),
@@ -387,5 +394,34 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
     println!("recorded: seed {} actions {names:?}", rec.episodes[0].seed);
     assert_eq!(rec.episodes[0].seed, 5);
     use modesuite::render::teleop::TeleopAction;
-    assert_eq!(names, [TeleopAction::Grasp, TeleopAction::BodyForward]);
+    let mut expect = vec![TeleopAction::Grasp];
+    expect.extend([TeleopAction::BodyForward; 20]);
+    assert_eq!(names, expect);
+    // The robot drove forward: compare the final base with the same task reset with seed 5.
+    let mut env =
+        modesuite::cli::env_for_target("MoDe-Franka-Place-v0", Some("(discrete: true)")).unwrap();
+    env.reset(Some(5));
+    let x0 = {
+        let r = &env.app.world.resource::<modesuite::robots::Robots>().robots[0];
+        r.observe(env.app.world.resource::<modesuite::engine::RigidContext>())
+            .unwrap()
+            .base
+            .translation
+            .vector
+    };
+    let dump: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("final.json")).unwrap()).unwrap();
+    let p = &dump["objects"]["robot"]["position"];
+    let x1 = nalgebra::Vector3::new(
+        p[0].as_f64().unwrap(),
+        p[1].as_f64().unwrap(),
+        p[2].as_f64().unwrap(),
+    );
+    println!(
+        "base moved {:.3} m in {} steps",
+        (x1 - x0).xy().norm(),
+        dump["step"]
+    );
+    assert_eq!(dump["episode_length"], 21);
+    assert!((x1 - x0).xy().norm() > 0.06, "the robot drove forward");
 }

@@ -113,8 +113,9 @@ struct Viewer {
     summary: ViewerSummary,
 }
 
-/// Opens a window on `env` (its scene spawned) and runs until the window closes or `esc`.
-pub fn run_viewer(mut env: Env, opts: ViewerOptions) -> Result<ViewerSummary, RenderError> {
+/// Opens a window on `env` (its scene spawned) and runs until the window closes or `esc`;
+/// returns what happened and the env in its final state.
+pub fn run_viewer(mut env: Env, opts: ViewerOptions) -> Result<(ViewerSummary, Env), RenderError> {
     if env.app.scene().is_none() {
         return Err(RenderError::Device(
             "view: the env has no spawned scene".into(),
@@ -170,7 +171,7 @@ pub fn run_viewer(mut env: Env, opts: ViewerOptions) -> Result<ViewerSummary, Re
     }
     match viewer.error.take() {
         Some(e) => Err(e),
-        None => Ok(viewer.summary),
+        None => Ok((viewer.summary, viewer.env)),
     }
 }
 
