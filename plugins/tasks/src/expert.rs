@@ -83,7 +83,7 @@ fn sample(space: &Space, rng: &mut EnvRng, out: &mut [f32], k: &mut usize) {
 
 impl Policy for Random {
     fn reset(&mut self, seed: u64) {
-        self.rng = EnvRng::from_seed(seed ^ 0x5eed_0f_7a5c);
+        self.rng = EnvRng::from_seed(seed ^ 0x005e_ed0f_7a5c);
     }
     fn act(&mut self, _: &Env, action: &mut [f32]) -> Result<(), String> {
         let mut k = 0;

@@ -406,7 +406,10 @@ impl SceneSection for TaskSection {
             for (i, t) in gd.terms.iter().enumerate() {
                 let tpath = format!("{gpath}.terms[{i}]");
                 if let Some((lo, hi)) = t.clip {
-                    if !(lo <= hi) {
+                    if lo
+                        .partial_cmp(&hi)
+                        .is_none_or(|o| o == std::cmp::Ordering::Greater)
+                    {
                         return Err(serr(
                             &format!("{tpath}.clip"),
                             format!("({lo}, {hi})"),

@@ -380,7 +380,7 @@ pub fn register_library(app: &mut SimApp) {
                 Vector3::new(p.min.0, p.min.1, p.min.2),
                 Vector3::new(p.max.0, p.max.1, p.max.2),
             );
-            if (0..3).any(|i| !(lo[i] < hi[i])) {
+            if (0..3).any(|i| lo[i].partial_cmp(&hi[i]) != Some(std::cmp::Ordering::Less)) {
                 return Err(format!(
                     "min {:?} must be below max {:?} on every axis",
                     p.min, p.max
