@@ -751,203 +751,172 @@ fn eval(t: &NamedTerm, ctx: &TaskCtx, dims: &Dims, what: &str) -> Result<Vec<f64
     Ok(out)
 }
 
-/// Builds the term context and runs `f` with it.
-#[allow(clippy::too_many_arguments)]
-fn with_ctx<R>(
-    task: &Task,
-    state: &TaskState,
-    robots: &Robots,
-    rigid: &RigidContext,
-    view: &ViewQuery,
-    nodes: &Query<&DeformableNodes>,
-    clock: &SimClock,
-    settings: &SimSettings,
-    pbd: Option<&PbdContext>,
-    action: &[f32],
-    f: impl FnOnce(&TaskCtx) -> R,
-) -> Result<R, String> {
-    let world = world_view(view, clock, settings);
-    let robot = robots
-        .get(&task.model.robot)
-        .ok_or_else(|| format!("robot \"{}\" is gone", task.model.robot))?
-        .observe(rigid)
-        .map_err(|e| e.to_string())?;
-    let points = resolve_points(task, state, &robot, &world, nodes)?;
-    let cloths: Vec<(&str, &Cloth)> = match pbd {
-        Some(p) => task
-            .cloths
-            .iter()
-            .filter_map(|(n, e)| p.get(*e).map(|c| (n.as_str(), c)))
-            .collect(),
-        None => Vec::new(),
-    };
-    let zeros = vec![0.0f32; action.len()];
-    let prev = if state.prev_action.len() == action.len() {
-        &state.prev_action[..]
-    } else {
-        &zeros[..]
-    };
-    let ctx = TaskCtx {
-        world: &world,
-        robot: &robot,
-        arm_joints: &task.arm_joints,
-        leg_joints: &task.leg_joints,
-        points: &points,
-        action,
-        prev_action: prev,
-        cloths: &cloths,
-        base_height: task.base_height,
-    };
-    Ok(f(&ctx))
+/// What the evaluate and observe systems read to build a term context.
+#[derive(bevy_ecs::system::SystemParam)]
+struct TaskWorld<'w, 's> {
+    task: Option<Res<'w, Task>>,
+    state: Option<ResMut<'w, TaskState>>,
+    robots: Option<Res<'w, Robots>>,
+    rigid: Option<Res<'w, RigidContext>>,
+    view: ViewQuery<'w, 's>,
+    nodes: Query<'w, 's, &'static DeformableNodes>,
+    clock: Res<'w, SimClock>,
+    settings: Res<'w, SimSettings>,
+    pbd: Option<Res<'w, PbdContext>>,
+    action: Res<'w, ActionBuffer>,
 }
 
-#[allow(clippy::too_many_arguments)]
-fn task_evaluate(
-    task: Option<Res<Task>>,
-    mut state: Option<ResMut<TaskState>>,
-    robots: Option<Res<Robots>>,
-    rigid: Option<Res<RigidContext>>,
-    view: ViewQuery,
-    nodes: Query<&DeformableNodes>,
-    clock: Res<SimClock>,
-    settings: Res<SimSettings>,
-    pbd: Option<Res<PbdContext>>,
-    action: Res<ActionBuffer>,
-    mut signals: ResMut<StepSignals>,
-    mut errors: ResMut<SimErrors>,
-) {
-    let (Some(task), Some(state), Some(robots), Some(rigid)) =
-        (task, state.as_deref_mut(), robots, rigid)
-    else {
-        return;
-    };
-    let step_dt = settings.dt * f64::from(settings.decimation);
-    let dims = task.dims;
-    let m = task.model.clone();
-    let result = with_ctx(
-        &task,
-        state,
-        &robots,
-        &rigid,
-        &view,
-        &nodes,
-        &clock,
-        &settings,
-        pbd.as_deref(),
-        &action.0,
-        |ctx| -> Result<(), String> {
-            for r in &m.rewards {
-                let v = eval(&r.term, ctx, &dims, "reward")?[0];
-                let w = r.weight * if r.dt_scaled { step_dt } else { 1.0 };
-                signals.reward += w * v;
-                *signals
-                    .values
-                    .entry(format!("reward/{}", r.term.name))
-                    .or_default() += w * v;
-            }
-            let mut ok = !m.success.is_empty();
-            for s in &m.success {
-                let v = eval(s, ctx, &dims, "success")?[0];
-                signals.values.insert(format!("success/{}", s.name), v);
-                ok &= v != 0.0;
-            }
-            for t in &m.terminations {
-                let v = eval(t, ctx, &dims, "termination")?[0];
-                signals.values.insert(format!("termination/{}", t.name), v);
-                if v != 0.0 {
-                    signals.terminated = true;
-                }
-            }
-            if !m.success.is_empty() {
-                signals.success = Some(ok);
-                if ok {
-                    signals.terminated = true;
-                    signals.reward += m.success_bonus;
-                    signals
-                        .values
-                        .insert("reward/success_bonus".into(), m.success_bonus);
-                }
-            }
-            Ok(())
-        },
-    );
-    match result.and_then(|r| r) {
-        Ok(()) => {
-            state.success = signals.success == Some(true);
-            state.prev_action.clone_from(&action.0);
-        }
-        Err(e) => errors.raise(e),
+impl TaskWorld<'_, '_> {
+    /// Runs `f` with the term context and the task state (`None`: this env has no task).
+    fn with_ctx<R>(
+        &mut self,
+        f: impl FnOnce(&Task, &TaskCtx) -> R,
+    ) -> Option<Result<(R, &mut TaskState), String>> {
+        let (Some(task), Some(state), Some(robots), Some(rigid)) = (
+            self.task.as_deref(),
+            self.state.as_deref_mut(),
+            self.robots.as_deref(),
+            self.rigid.as_deref(),
+        ) else {
+            return None;
+        };
+        let action = &self.action.0[..];
+        let world = world_view(&self.view, &self.clock, &self.settings);
+        let r = (|| {
+            let robot = robots
+                .get(&task.model.robot)
+                .ok_or_else(|| format!("robot \"{}\" is gone", task.model.robot))?
+                .observe(rigid)
+                .map_err(|e| e.to_string())?;
+            let points = resolve_points(task, state, &robot, &world, &self.nodes)?;
+            let cloths: Vec<(&str, &Cloth)> = match self.pbd.as_deref() {
+                Some(p) => task
+                    .cloths
+                    .iter()
+                    .filter_map(|(n, e)| p.get(*e).map(|c| (n.as_str(), c)))
+                    .collect(),
+                None => Vec::new(),
+            };
+            let zeros = vec![0.0f32; action.len()];
+            let prev = if state.prev_action.len() == action.len() {
+                &state.prev_action[..]
+            } else {
+                &zeros[..]
+            };
+            let ctx = TaskCtx {
+                world: &world,
+                robot: &robot,
+                arm_joints: &task.arm_joints,
+                leg_joints: &task.leg_joints,
+                points: &points,
+                action,
+                prev_action: prev,
+                cloths: &cloths,
+                base_height: task.base_height,
+            };
+            Ok(f(task, &ctx))
+        })();
+        Some(r.map(|v| (v, state)))
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+fn task_evaluate(
+    mut tw: TaskWorld,
+    mut signals: ResMut<StepSignals>,
+    mut errors: ResMut<SimErrors>,
+) {
+    let step_dt = tw.settings.dt * f64::from(tw.settings.decimation);
+    let action = tw.action.0.clone();
+    let result = tw.with_ctx(|task, ctx| -> Result<(), String> {
+        let (m, dims) = (&task.model, task.dims);
+        for r in &m.rewards {
+            let v = eval(&r.term, ctx, &dims, "reward")?[0];
+            let w = r.weight * if r.dt_scaled { step_dt } else { 1.0 };
+            signals.reward += w * v;
+            *signals
+                .values
+                .entry(format!("reward/{}", r.term.name))
+                .or_default() += w * v;
+        }
+        let mut ok = !m.success.is_empty();
+        for s in &m.success {
+            let v = eval(s, ctx, &dims, "success")?[0];
+            signals.values.insert(format!("success/{}", s.name), v);
+            ok &= v != 0.0;
+        }
+        for t in &m.terminations {
+            let v = eval(t, ctx, &dims, "termination")?[0];
+            signals.values.insert(format!("termination/{}", t.name), v);
+            if v != 0.0 {
+                signals.terminated = true;
+            }
+        }
+        if !m.success.is_empty() {
+            signals.success = Some(ok);
+            if ok {
+                signals.terminated = true;
+                signals.reward += m.success_bonus;
+                signals
+                    .values
+                    .insert("reward/success_bonus".into(), m.success_bonus);
+            }
+        }
+        Ok(())
+    });
+    match result {
+        None => {}
+        Some(Ok((Ok(()), state))) => {
+            state.success = signals.success == Some(true);
+            state.prev_action = action;
+        }
+        Some(Ok((Err(e), _)) | Err(e)) => errors.raise(e),
+    }
+}
+
 fn task_observe(
-    task: Option<Res<Task>>,
-    mut state: Option<ResMut<TaskState>>,
-    robots: Option<Res<Robots>>,
-    rigid: Option<Res<RigidContext>>,
-    view: ViewQuery,
-    nodes: Query<&DeformableNodes>,
-    clock: Res<SimClock>,
-    settings: Res<SimSettings>,
-    pbd: Option<Res<PbdContext>>,
-    action: Res<ActionBuffer>,
+    mut tw: TaskWorld,
     mut rng: ResMut<EnvRng>,
     mut buffer: ResMut<ObservationBuffer>,
     mut all: ResMut<TaskObservations>,
     mut named: ResMut<TaskPoints>,
     mut errors: ResMut<SimErrors>,
 ) {
-    let (Some(task), Some(state), Some(robots), Some(rigid)) =
-        (task, state.as_deref_mut(), robots, rigid)
-    else {
+    let first = tw.clock.episode_steps == 0;
+    let Some(model) = tw.task.as_deref().map(|t| t.model.clone()) else {
         return;
     };
-    let dims = task.dims;
-    let m = task.model.clone();
-    let frames = with_ctx(
-        &task,
-        state,
-        &robots,
-        &rigid,
-        &view,
-        &nodes,
-        &clock,
-        &settings,
-        pbd.as_deref(),
-        &action.0,
-        |ctx| -> Result<Vec<Vec<f32>>, String> {
-            named.0.clear();
-            for (n, id) in &m.named {
-                named.0.insert(n.clone(), ctx.point(*id));
-            }
-            m.groups
-                .iter()
-                .map(|g| {
-                    let mut frame = Vec::new();
-                    for t in &g.terms {
-                        for v in eval(&t.term, ctx, &dims, "observation")? {
-                            let mut x = v * t.scale;
-                            if let Some((lo, hi)) = t.clip {
-                                x = x.clamp(lo, hi);
-                            }
-                            frame.push(x);
+    let result = tw.with_ctx(|task, ctx| -> Result<Vec<Vec<f32>>, String> {
+        let (m, dims) = (&task.model, task.dims);
+        named.0.clear();
+        for (n, id) in &m.named {
+            named.0.insert(n.clone(), ctx.point(*id));
+        }
+        m.groups
+            .iter()
+            .map(|g| {
+                let mut frame = Vec::new();
+                for t in &g.terms {
+                    for v in eval(&t.term, ctx, &dims, "observation")? {
+                        let mut x = v * t.scale;
+                        if let Some((lo, hi)) = t.clip {
+                            x = x.clamp(lo, hi);
                         }
+                        frame.push(x as f32);
                     }
-                    Ok(frame.into_iter().map(|x| x as f32).collect())
-                })
-                .collect()
-        },
-    );
-    let frames = match frames.and_then(|r| r) {
-        Ok(f) => f,
-        Err(e) => {
+                }
+                Ok(frame)
+            })
+            .collect()
+    });
+    let (frames, state) = match result {
+        None => return,
+        Some(Ok((Ok(f), state))) => (f, state),
+        Some(Ok((Err(e), _)) | Err(e)) => {
             errors.raise(e);
             return;
         }
     };
-    let first = clock.episode_steps == 0;
-    for (k, (g, mut frame)) in m.groups.iter().zip(frames).enumerate() {
+    for (k, (g, mut frame)) in model.groups.iter().zip(frames).enumerate() {
         if g.noise > 0.0 {
             for x in frame.iter_mut() {
                 *x += rng.range(-g.noise, g.noise) as f32;

@@ -437,14 +437,14 @@ pub fn register_library(app: &mut SimApp) {
         "arm_joints",
         Observation,
         "arm joint positions with the gripper last, then their velocities (2 x (n + 1))",
-        factory(|_: Unit, _| Ok(Arc::new(ArmJoints) as Arc<dyn TaskTerm>)),
+        factory(|_: Unit, _| Ok(Arc::new(JointStates { legs: false }) as Arc<dyn TaskTerm>)),
     );
     reg(
         app,
         "leg_joints",
         Observation,
         "leg joint positions then velocities (24 for Spot, 0 for a wheeled base)",
-        factory(|_: Unit, _| Ok(Arc::new(LegJoints) as Arc<dyn TaskTerm>)),
+        factory(|_: Unit, _| Ok(Arc::new(JointStates { legs: true }) as Arc<dyn TaskTerm>)),
     );
     reg(
         app,
@@ -578,31 +578,23 @@ fn region(p: &RegionParams) -> Result<Region, String> {
     })
 }
 
-struct ArmJoints;
-
-impl TaskTerm for ArmJoints {
-    fn dim(&self, d: &Dims) -> usize {
-        2 * d.arm
-    }
-    fn evaluate(&self, c: &TaskCtx, out: &mut [f64]) -> Result<(), String> {
-        let n = c.arm_joints.len();
-        for (i, &j) in c.arm_joints.iter().enumerate() {
-            out[i] = c.robot.q[j];
-            out[n + i] = c.robot.qd[j];
-        }
-        Ok(())
-    }
+/// Positions then velocities of a set of the robot's joints (arm with gripper, or legs).
+struct JointStates {
+    legs: bool,
 }
 
-struct LegJoints;
-
-impl TaskTerm for LegJoints {
+impl TaskTerm for JointStates {
     fn dim(&self, d: &Dims) -> usize {
-        2 * d.legs
+        2 * if self.legs { d.legs } else { d.arm }
     }
     fn evaluate(&self, c: &TaskCtx, out: &mut [f64]) -> Result<(), String> {
-        let n = c.leg_joints.len();
-        for (i, &j) in c.leg_joints.iter().enumerate() {
+        let joints = if self.legs {
+            c.leg_joints
+        } else {
+            c.arm_joints
+        };
+        let n = joints.len();
+        for (i, &j) in joints.iter().enumerate() {
             out[i] = c.robot.q[j];
             out[n + i] = c.robot.qd[j];
         }
