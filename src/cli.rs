@@ -336,7 +336,20 @@ fn list(
         Ok(())
     };
     if want("tasks") {
-        section("tasks", Vec::new())?;
+        section(
+            "tasks",
+            modesuite_tasks::all_ids()
+                .into_iter()
+                .map(|id| {
+                    let d = if modesuite_tasks::IMPLEMENTED.contains(&id.as_str()) {
+                        "implemented, with a scripted expert"
+                    } else {
+                        "not implemented yet"
+                    };
+                    (id, d.to_string())
+                })
+                .collect(),
+        )?;
     }
     if want("robots") {
         section(

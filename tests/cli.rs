@@ -156,7 +156,7 @@ fn bad_input_exits_2_with_a_located_message_and_no_panic() {
 
     for args in [
         vec!["run", "no/such/file.scene.ron"],
-        vec!["run", "MoDe-Franka-Place-v0"],
+        vec!["run", "MoDe-Spot-Curtain-v0"],
         vec!["bench", "nonsense"],
         vec!["list", "nonsense"],
         vec!["run", "scenes/examples/drop.scene.ron", "--steps", "0"],
@@ -184,18 +184,29 @@ fn validate_every_example_and_list_categories() {
 
 #[test]
 fn default_command_runs_the_embedded_default() {
-    let out = modesuite().output().unwrap();
+    // From an empty folder: the task files are embedded; the video goes to ./out.
+    let dir = tmp("default");
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = modesuite()
+        .current_dir(&dir)
+        .env("MODESUITE_SCENES", &dir)
+        .output()
+        .unwrap();
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("summary: 1 episodes"), "{text}");
+    println!("{text}");
+    assert!(text.contains("MoDe-Franka-Place-v0"), "{text}");
+    assert!(text.contains("summary: 1 episodes, success rate 100.0 %"), "{text}");
+    let gif = std::fs::read(dir.join("out/MoDe-Franka-Place-v0.gif")).unwrap();
+    assert!(gif.starts_with(b"GIF89a") && gif.len() > 10_000, "a GIF video");
 }
 
 #[test]
-fn bench_fem_pbd_and_robots_json_have_their_keys() {
+fn bench_suites_json_have_their_keys() {
     for (suite, cases, keys) in [
         (
             "fem",
@@ -216,6 +227,11 @@ fn bench_fem_pbd_and_robots_json_have_their_keys() {
             "robots",
             &["franka", "spot"][..],
             &["robot", "mode", "distance_m"][..],
+        ),
+        (
+            "tasks",
+            &["MoDe-Franka-Place-v0", "MoDe-Franka-Place-v0_x16"][..],
+            &["task"][..],
         ),
     ] {
         let out = modesuite()
