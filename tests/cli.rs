@@ -200,9 +200,15 @@ fn default_command_runs_the_embedded_default() {
     let text = String::from_utf8_lossy(&out.stdout);
     println!("{text}");
     assert!(text.contains("MoDe-Franka-Place-v0"), "{text}");
-    assert!(text.contains("summary: 1 episodes, success rate 100.0 %"), "{text}");
+    assert!(
+        text.contains("summary: 1 episodes, success rate 100.0 %"),
+        "{text}"
+    );
     let gif = std::fs::read(dir.join("out/MoDe-Franka-Place-v0.gif")).unwrap();
-    assert!(gif.starts_with(b"GIF89a") && gif.len() > 10_000, "a GIF video");
+    assert!(
+        gif.starts_with(b"GIF89a") && gif.len() > 10_000,
+        "a GIF video"
+    );
 }
 
 #[test]
