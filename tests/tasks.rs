@@ -306,3 +306,11 @@ fn task_section_errors_name_the_entry() {
         ]
     );
 }
+
+#[test]
+fn a_task_env_has_no_ambiguous_systems() {
+    let mut env = make(PLACE, None);
+    let amb = env.app.ambiguities();
+    println!("ambiguous system pairs: {} (expected 0) {amb:#?}", amb.len());
+    assert!(amb.is_empty());
+}

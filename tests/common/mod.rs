@@ -47,11 +47,17 @@ impl Plugin for PokePlugin {
             },
         });
         app.add_systems(PhysicsStep, poke.in_set(PhysicsSystems::ApplyActions));
-        app.add_systems(EnvStep, (observe,).in_set(EnvSystems::Observe));
+        app.add_systems(
+            EnvStep,
+            (observe,)
+                .in_set(EnvSystems::Observe)
+                .after(modesuite::tasks::TaskSystems::Observe),
+        );
         app.add_systems(
             EnvStep,
             reward
                 .in_set(EnvSystems::Evaluate)
+                .after(modesuite::tasks::TaskSystems::Evaluate)
                 .before(EngineSystems::TimeLimit),
         );
     }

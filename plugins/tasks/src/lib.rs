@@ -25,7 +25,9 @@ use modesuite_engine::{Plugin, SimApp};
 
 pub use desc::{EventDesc, PointRef, TaskDesc};
 pub use expert::{make_policy, Policy, PolicyKind};
-pub use manager::{Task, TaskModel, TaskObservations, TaskPoints, TaskSection, TaskState};
+pub use manager::{
+    Task, TaskModel, TaskObservations, TaskPoints, TaskSection, TaskState, TaskSystems,
+};
 pub use terms::{register_task_term, Configure, Dims, TaskCtx, TaskTerm, TaskTermFactory};
 
 /// The two robots, as written in ids.

@@ -684,21 +684,42 @@ impl SceneSection for TaskSection {
     }
 }
 
+/// The task managers' sets. Other plugins that write `StepSignals` or the observation buffer
+/// order themselves `.after(TaskSystems::Evaluate)` / `.after(TaskSystems::Observe)` (the
+/// managers run first; later systems may add to the reward or the observation).
+#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+pub enum TaskSystems {
+    /// Reset events (in `EnvSystems::Reset`).
+    Reset,
+    /// Rewards, success, terminations (in `EnvSystems::Evaluate`, before the time limit).
+    Evaluate,
+    /// Observation groups (in `EnvSystems::Observe`).
+    Observe,
+}
+
 /// Adds the task systems (the section spawns the resources they need).
 pub fn add_task_systems(app: &mut SimApp) {
-    app.add_systems(
+    app.configure_sets(
         modesuite_engine::EnvStep,
-        task_reset.in_set(EnvSystems::Reset),
+        (
+            TaskSystems::Reset.in_set(EnvSystems::Reset),
+            TaskSystems::Evaluate
+                .in_set(EnvSystems::Evaluate)
+                .before(EngineSystems::TimeLimit),
+            TaskSystems::Observe.in_set(EnvSystems::Observe),
+        ),
     );
     app.add_systems(
         modesuite_engine::EnvStep,
-        task_evaluate
-            .in_set(EnvSystems::Evaluate)
-            .before(EngineSystems::TimeLimit),
+        task_reset.in_set(TaskSystems::Reset),
     );
     app.add_systems(
         modesuite_engine::EnvStep,
-        task_observe.in_set(EnvSystems::Observe),
+        task_evaluate.in_set(TaskSystems::Evaluate),
+    );
+    app.add_systems(
+        modesuite_engine::EnvStep,
+        task_observe.in_set(TaskSystems::Observe),
     );
 }
 
