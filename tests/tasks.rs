@@ -97,6 +97,43 @@ fn place_spaces_match_the_documented_layout() {
     assert!((f64::from(o[34]) - table.x).abs() < 1e-6 && (f64::from(o[36]) - table.z).abs() < 1e-6);
 }
 
+/// Teleports the Franka's holonomic base (virtual joints, world x, y with the robot spawned at
+/// the origin).
+fn set_base(env: &mut Env, x: f64, y: f64) {
+    let f = env.app.world.resource::<Robots>().robots[0].fixed.clone();
+    let b = f.base.unwrap();
+    let mut ctx = env.app.world.resource_mut::<RigidContext>();
+    let mut q = f.robot.joint_positions(&ctx).unwrap();
+    q[b.x] = x;
+    q[b.y] = y;
+    q[b.yaw] = 0.0;
+    f.robot.set_joint_positions(&mut ctx, &q).unwrap();
+}
+
+#[test]
+fn curtain_success_and_frame_contact_on_constructed_states() {
+    const CURTAIN: &str = "MoDe-Franka-Curtain-v0";
+    let zero = [0.0f32; 10];
+    for (x, y, success, touched) in [
+        (2.2, 0.0, true, false),  // through
+        (1.9, 0.0, false, false), // near miss: 0.1 m short
+        (1.5, 0.45, false, true), // against the right post (y = 0.6)
+    ] {
+        let mut env = make(CURTAIN, None);
+        set_base(&mut env, x, y);
+        let o = env.step(&zero);
+        let contact = o.info.values["termination/touched_frame"];
+        println!(
+            "base at ({x}, {y}): success {:?}, frame contact {contact}",
+            o.info.success
+        );
+        assert_eq!(o.info.success, Some(success));
+        assert_eq!(contact != 0.0, touched);
+        assert_eq!(o.terminated, success || touched);
+        assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
+    }
+}
+
 #[test]
 fn every_action_mode_resets_and_steps() {
     let modes = [
@@ -107,17 +144,21 @@ fn every_action_mode_resets_and_steps() {
         ("(base: Off, arm: Off, gripper: Binary)", 1),
         ("(discrete: true)", 1),
     ];
-    for (m, dim) in modes {
-        let mut env = make(PLACE, Some(m));
-        assert_eq!(env.spaces().action.flat_dim(), dim, "{m}");
+    for (id, (m, dim)) in modesuite::tasks::IMPLEMENTED
+        .iter()
+        .flat_map(|id| modes.iter().map(move |m| (*id, *m)))
+    {
+        let mut env = make(id, Some(m));
+        assert_eq!(env.spaces().action.flat_dim(), dim, "{id} {m}");
+        let obs_dim = env.spaces().observation.flat_dim();
         let mut policy = make_policy(PolicyKind::Random, &env).unwrap();
         policy.reset(3);
         let mut a = vec![0.0; dim];
         for _ in 0..20 {
             policy.act(&env, &mut a).unwrap();
             let o = env.step(&a);
-            assert!(o.info.error.is_none(), "{m}: {:?}", o.info.error);
-            assert_eq!(o.observation.len(), 43);
+            assert!(o.info.error.is_none(), "{id} {m}: {:?}", o.info.error);
+            assert_eq!(o.observation.len(), obs_dim);
         }
         env.reset(Some(1));
     }
@@ -220,22 +261,27 @@ fn an_episode_ends_on_success_or_time_out_with_the_right_flags() {
 }
 
 #[test]
-fn the_place_expert_succeeds_on_several_seeds() {
-    let mut env = make(PLACE, None);
+fn every_expert_succeeds_on_several_seeds() {
+    for id in modesuite::tasks::IMPLEMENTED {
+        expert_seeds(id, &[0, 7, 13, 21]);
+    }
+}
+
+fn expert_seeds(id: &str, seeds: &[u64]) {
+    let mut env = make(id, None);
     let mut expert = make_policy(PolicyKind::Scripted, &env).unwrap();
-    let mut a = vec![0.0; 9];
+    let mut a = vec![0.0; env.spaces().action.flat_dim()];
     let mut wins = 0;
-    let seeds = [0u64, 7, 13, 21];
-    for seed in seeds {
+    for &seed in seeds {
         env.reset(Some(seed));
         expert.reset(seed);
-        for _ in 0..600 {
+        loop {
             expert.act(&env, &mut a).unwrap();
             let o = env.step(&a);
             if o.terminated || o.truncated {
                 let s = o.info.final_info.unwrap().success;
                 println!(
-                    "seed {seed}: success {s:?}, {} steps",
+                    "{id} seed {seed}: success {s:?}, {} steps",
                     o.info.episode.unwrap().length
                 );
                 wins += usize::from(s == Some(true));
@@ -311,6 +357,9 @@ fn task_section_errors_name_the_entry() {
 fn a_task_env_has_no_ambiguous_systems() {
     let mut env = make(PLACE, None);
     let amb = env.app.ambiguities();
-    println!("ambiguous system pairs: {} (expected 0) {amb:#?}", amb.len());
+    println!(
+        "ambiguous system pairs: {} (expected 0) {amb:#?}",
+        amb.len()
+    );
     assert!(amb.is_empty());
 }

@@ -1024,6 +1024,8 @@ pub struct RobotObservation {
     pub ee: Isometry3<f64>,
     /// Per rapier body ([`Robot::bodies`] order): touching anything that is not the robot.
     pub link_contacts: Vec<bool>,
+    /// Body ids ([`RigidContext::body_of_id`]) of the other bodies the robot touches, sorted.
+    pub touching: Vec<u32>,
     /// Gripper closed.
     pub gripper_closed: bool,
 }
@@ -1035,6 +1037,7 @@ impl RobotRuntime {
         let robot = &f.robot;
         let own: Vec<_> = robot.bodies.iter().map(|b| b.handle).collect();
         let mut link_contacts = vec![false; robot.bodies.len()];
+        let mut touching = Vec::new();
         for (i, b) in robot.bodies.iter().enumerate() {
             let Some(rb) = ctx.bodies.get(b.handle) else {
                 continue;
@@ -1052,6 +1055,9 @@ impl RobotRuntime {
                     let other_body = ctx.colliders.get(other).and_then(|c| c.parent());
                     if other_body.is_none_or(|h| !own.contains(&h)) {
                         link_contacts[i] = true;
+                        if let Some(id) = other_body.and_then(|h| ctx.body_id(h)) {
+                            touching.push(id);
+                        }
                     }
                 }
             }
@@ -1062,6 +1068,11 @@ impl RobotRuntime {
             qd: robot.joint_velocities(ctx)?,
             ee: robot.frame_pose(ctx, f.ee_frame)?,
             link_contacts,
+            touching: {
+                touching.sort_unstable();
+                touching.dedup();
+                touching
+            },
             gripper_closed: self.gripper_closed,
         })
     }

@@ -133,6 +133,20 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     }
                     Ok(Box::new(PlaceExpert { robot }))
                 }
+                "curtain" => {
+                    if !matches!(modes.base, BaseMode::Velocity)
+                        || !matches!(
+                            modes.arm,
+                            ArmMode::EePoseDelta | ArmMode::EePoseAbsolute | ArmMode::Off
+                        )
+                    {
+                        return Err(format!(
+                            "the curtain expert drives base: Velocity and arm: EePoseDelta, EePoseAbsolute or Off; this run has base {:?}, arm {:?}",
+                            modes.base, modes.arm
+                        ));
+                    }
+                    Ok(Box::new(CurtainExpert { robot }))
+                }
                 other => Err(format!("no scripted expert named \"{other}\"")),
             }
         }
@@ -198,6 +212,7 @@ fn write_action(
             }
             k += 6;
         }
+        ArmMode::Off => {}
         other => return Err(format!("arm mode {other:?} is not driven by this expert")),
     }
     if m.gripper == GripperMode::Binary {
@@ -242,5 +257,27 @@ impl Policy for PlaceExpert {
         // The rod is attached to the hand; the fingers stay open around it (closing them would
         // squeeze the 7 cm rod).
         write_action(env, rt, (v, -2.0 * yaw), ee, false, action)
+    }
+}
+
+/// Curtain: line the base up with the middle of the frame (y = 0, heading 0) while approaching
+/// slowly, then drive straight through at 0.4 m/s with the arm held where it is; the body pushes
+/// the curtain aside.
+struct CurtainExpert {
+    robot: String,
+}
+
+impl Policy for CurtainExpert {
+    fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
+        let rt = robot_of(env, &self.robot)?;
+        let ctx = env.app.world.resource::<RigidContext>();
+        let obs = rt.observe(ctx).map_err(|e| e.to_string())?;
+        let (_, _, yaw) = obs.base.rotation.euler_angles();
+        let b = obs.base.translation.vector;
+        let aligned = b.y.abs() < 0.03 && yaw.abs() < 0.03;
+        let vx = if aligned || b.x > 1.0 { 0.4 } else { 0.1 };
+        let v = Vector2::new(vx, -2.0 * b.y);
+        let hold = rt.ee_target.translation.vector;
+        write_action(env, rt, (v, -2.0 * yaw), hold, false, action)
     }
 }

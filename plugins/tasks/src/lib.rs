@@ -11,8 +11,9 @@
 //! ([`terms`]) and the systems ([`manager`]). Task ids resolve to scene files with
 //! [`task_scene_path`].
 //!
-//! Status: the managers, the term library, policies, and `MoDe-Franka-Place-v0` with its
-//! scripted expert. The other ids are known and answer with a clear "not implemented yet".
+//! Status: the managers, the term library, policies, and [`IMPLEMENTED`] environments with
+//! their scripted experts. The other ids are known and answer with a clear "not implemented
+//! yet".
 
 pub mod desc;
 pub mod expert;
@@ -44,7 +45,7 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 1] = ["MoDe-Franka-Place-v0"];
+pub const IMPLEMENTED: [&str; 2] = ["MoDe-Franka-Place-v0", "MoDe-Franka-Curtain-v0"];
 
 /// All 16 environment ids, robot-major.
 pub fn all_ids() -> Vec<String> {
@@ -94,6 +95,14 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "place/franka.scene.ron",
         include_str!("../../../scenes/place/franka.scene.ron"),
+    ),
+    (
+        "curtain/curtain.task.ron",
+        include_str!("../../../scenes/curtain/curtain.task.ron"),
+    ),
+    (
+        "curtain/franka.scene.ron",
+        include_str!("../../../scenes/curtain/franka.scene.ron"),
     ),
 ];
 

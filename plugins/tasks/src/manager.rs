@@ -785,6 +785,7 @@ struct TaskWorld<'w, 's> {
     settings: Res<'w, SimSettings>,
     pbd: Option<Res<'w, PbdContext>>,
     action: Res<'w, ActionBuffer>,
+    names: Query<'w, 's, &'static Object>,
 }
 
 impl TaskWorld<'_, '_> {
@@ -810,6 +811,13 @@ impl TaskWorld<'_, '_> {
                 .observe(rigid)
                 .map_err(|e| e.to_string())?;
             let points = resolve_points(task, state, &robot, &world, &self.nodes)?;
+            let touching: Vec<&str> = robot
+                .touching
+                .iter()
+                .filter_map(|id| rigid.body_of_id(*id))
+                .filter_map(|(_, e)| self.names.get(e).ok())
+                .map(|o| o.name.as_str())
+                .collect();
             let cloths: Vec<(&str, &Cloth)> = match self.pbd.as_deref() {
                 Some(p) => task
                     .cloths
@@ -834,6 +842,7 @@ impl TaskWorld<'_, '_> {
                 prev_action: prev,
                 cloths: &cloths,
                 base_height: task.base_height,
+                touching: &touching,
             };
             Ok(f(task, &ctx))
         })();

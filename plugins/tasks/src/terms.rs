@@ -116,6 +116,8 @@ pub struct TaskCtx<'a> {
     pub cloths: &'a [(&'a str, &'a Cloth)],
     /// Nominal base height of the robot (stability terms).
     pub base_height: f64,
+    /// Names of the scene objects the robot touches.
+    pub touching: &'a [&'a str],
 }
 
 impl TaskCtx<'_> {
@@ -287,6 +289,12 @@ struct RegionParams {
     /// Only particles higher than this count, m (fraction terms).
     #[serde(default)]
     above: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ContactParams {
+    objects: Vec<String>,
 }
 
 #[derive(Deserialize)]
@@ -547,6 +555,21 @@ pub fn register_library(app: &mut SimApp) {
             Ok(term(1, move |c, out| {
                 let cloth = c.cloth(&p.object)?;
                 out[0] = cloth.covered_area(&region, 40) / region.area();
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "robot_contact",
+        Termination,
+        "1 when the robot touches any of the named objects (objects: [...]), else 0",
+        factory(|p: ContactParams, cfg| {
+            for o in &p.objects {
+                cfg.object(o)?;
+            }
+            Ok(term(1, move |c, out| {
+                out[0] = f64::from(c.touching.iter().any(|t| p.objects.iter().any(|o| o == t)));
                 Ok(())
             }))
         }),
