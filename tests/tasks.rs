@@ -363,3 +363,37 @@ fn a_task_env_has_no_ambiguous_systems() {
     );
     assert!(amb.is_empty());
 }
+
+#[test]
+fn a_failing_reset_event_is_reported_and_ends_the_first_step() {
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place/franka.scene.ron"),
+    )
+    .unwrap()
+    .replace(r#"carry: ["rod"]"#, r#"carry: ["table"]"#);
+    let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
+    let mut app = modesuite::cli::default_app();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
+    let model = app
+        .compile_scene(&desc, &SceneSource::in_memory(dir))
+        .unwrap();
+    app.spawn_scene(model).unwrap();
+    let mut env = Env::new(app);
+    let (_, info) = env.reset(Some(0));
+    let e = info.error.expect("the reset reports the failed event");
+    println!("{e}");
+    assert!(
+        e.contains("robot_start") && e.contains("\"table\" is not a deformable"),
+        "{e}"
+    );
+    let o = env.step(&[0.0; 9]);
+    assert!(
+        o.truncated
+            && o.info
+                .final_info
+                .unwrap()
+                .error
+                .unwrap()
+                .contains("robot_start")
+    );
+}

@@ -202,6 +202,8 @@ pub struct Env {
     /// Reset finished episodes inside `step` (same-step autoreset; default true). With false,
     /// the world keeps the final state until the caller calls `reset`.
     pub autoreset: bool,
+    /// What failed in the last reset pass; the next step ends the episode with it.
+    reset_error: Option<String>,
 }
 
 impl Env {
@@ -215,6 +217,7 @@ impl Env {
             episode_return: 0.0,
             error_count: 0,
             autoreset: true,
+            reset_error: None,
         }
     }
 
@@ -235,7 +238,14 @@ impl Env {
         *self.app.world.resource_mut::<StepSignals>() = StepSignals::default();
         self.app.run_reset_pass();
         self.episode_return = 0.0;
-        let info = EnvInfo::default();
+        // A reset event that failed (bad randomisation, a plugin error) is reported here; the
+        // first step then ends the episode with the same error.
+        let errs = &self.app.world.resource::<SimErrors>().current;
+        self.reset_error = (!errs.is_empty()).then(|| format!("reset: {}", errs.join("; ")));
+        let info = EnvInfo {
+            error: self.reset_error.clone(),
+            ..EnvInfo::default()
+        };
         (self.observation(), info)
     }
 
@@ -261,6 +271,12 @@ impl Env {
                 let errs = &self.app.world.resource::<SimErrors>().current;
                 if !errs.is_empty() {
                     error = Some(errs.join("; "));
+                }
+                if let Some(e) = self.reset_error.take() {
+                    error = Some(match error {
+                        Some(later) => format!("{e}; {later}"),
+                        None => e,
+                    });
                 }
             }
             Err(e) => {

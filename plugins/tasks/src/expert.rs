@@ -134,14 +134,14 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     Ok(Box::new(PlaceExpert { robot }))
                 }
                 "curtain" => {
-                    if !matches!(modes.base, BaseMode::Velocity)
+                    if !matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion)
                         || !matches!(
                             modes.arm,
                             ArmMode::EePoseDelta | ArmMode::EePoseAbsolute | ArmMode::Off
                         )
                     {
                         return Err(format!(
-                            "the curtain expert drives base: Velocity and arm: EePoseDelta, EePoseAbsolute or Off; this run has base {:?}, arm {:?}",
+                            "the curtain expert drives base: Velocity or Locomotion and arm: EePoseDelta, EePoseAbsolute or Off; this run has base {:?}, arm {:?}",
                             modes.base, modes.arm
                         ));
                     }
@@ -185,10 +185,10 @@ fn write_action(
     let dt = s.dt * f64::from(s.decimation);
     let m = rt.fixed.modes;
     let mut k = 0;
-    if m.base == BaseMode::Velocity {
+    if matches!(m.base, BaseMode::Velocity | BaseMode::Locomotion) {
         let (_, _, yaw) = obs.base.rotation.euler_angles();
         let v = nalgebra::Rotation2::new(-yaw) * base_world.0;
-        // The holonomic base's limits: 0.5 m/s, 0.5 m/s, 1.0 rad/s (SPEC.md).
+        // The base command limits: 0.5 m/s, 0.5 m/s, 1.0 rad/s (SPEC.md).
         for x in [v.x / 0.5, v.y / 0.5, base_world.1] {
             action[k] = x.clamp(-1.0, 1.0) as f32;
             k += 1;
@@ -274,8 +274,8 @@ impl Policy for CurtainExpert {
         let obs = rt.observe(ctx).map_err(|e| e.to_string())?;
         let (_, _, yaw) = obs.base.rotation.euler_angles();
         let b = obs.base.translation.vector;
-        let aligned = b.y.abs() < 0.03 && yaw.abs() < 0.03;
-        let vx = if aligned || b.x > 1.0 { 0.4 } else { 0.1 };
+        let aligned = b.y.abs() < 0.06 && yaw.abs() < 0.06;
+        let vx = if aligned || b.x > 1.0 { 0.4 } else { 0.2 };
         let v = Vector2::new(vx, -2.0 * b.y);
         let hold = rt.ee_target.translation.vector;
         write_action(env, rt, (v, -2.0 * yaw), hold, false, action)

@@ -45,7 +45,11 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 2] = ["MoDe-Franka-Place-v0", "MoDe-Franka-Curtain-v0"];
+pub const IMPLEMENTED: [&str; 3] = [
+    "MoDe-Franka-Place-v0",
+    "MoDe-Franka-Curtain-v0",
+    "MoDe-Spot-Curtain-v0",
+];
 
 /// All 16 environment ids, robot-major.
 pub fn all_ids() -> Vec<String> {
@@ -103,6 +107,10 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "curtain/franka.scene.ron",
         include_str!("../../../scenes/curtain/franka.scene.ron"),
+    ),
+    (
+        "curtain/spot.scene.ron",
+        include_str!("../../../scenes/curtain/spot.scene.ron"),
     ),
 ];
 

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use bevy_ecs::prelude::*;
 use modesuite_engine::components::{DeformableNodes, Object, Pose};
 use modesuite_engine::env::{ActionBuffer, ObservationBuffer, StepSignals};
+use modesuite_engine::math::{pose_from_rapier, pose_to_rapier};
 use modesuite_engine::registry::{CompiledSection, SceneSection, SectionCompileContext};
 use modesuite_engine::rng::EnvRng;
 use modesuite_engine::scene::SceneError;
@@ -1013,7 +1014,9 @@ fn task_reset(
     // Moves a deformable rigidly (solver and its nodes component).
     let mut move_object = |name: &str, iso: &Isometry3<f64>| -> Result<(), String> {
         let Some((e, _, mut n)) = nodes.iter_mut().find(|(_, o, _)| o.name == name) else {
-            return Err(format!("object \"{name}\" is gone"));
+            return Err(format!(
+                "object \"{name}\" is not a deformable (fem.solid, pbd.cloth) a task can move"
+            ));
         };
         let moved: Vec<Vector3<f64>> =
             n.0.iter()
@@ -1042,24 +1045,36 @@ fn task_reset(
                 let rt = robots
                     .get(&m.robot)
                     .ok_or_else(|| format!("robot \"{}\" is gone", m.robot))?;
-                let base = rt.fixed.base.ok_or(
-                    "RobotPose needs a holonomic base (virtual x, y, yaw joints); legged bases are not supported yet",
-                )?;
                 let centre = rt
                     .observe(rigid)
                     .map_err(|e| e.to_string())?
                     .base
                     .translation
                     .vector;
+                let iso = planar_move(centre, Vector3::new(dx, dy, 0.0), dyaw);
                 let robot = &rt.fixed.robot;
                 let mut q = robot.joint_positions(rigid).map_err(|e| e.to_string())?;
-                q[base.x] += dx;
-                q[base.y] += dy;
-                q[base.yaw] += dyaw;
+                match rt.fixed.base {
+                    // A holonomic base: its virtual joints.
+                    Some(base) => {
+                        q[base.x] += dx;
+                        q[base.y] += dy;
+                        q[base.yaw] += dyaw;
+                    }
+                    // A floating base: move the root body; the links follow by forward
+                    // kinematics from it.
+                    None => {
+                        let root = rigid
+                            .bodies
+                            .get_mut(robot.root())
+                            .ok_or("the robot's root body is gone")?;
+                        let pose = iso * pose_from_rapier(root.position());
+                        root.set_position(pose_to_rapier(&pose), true);
+                    }
+                }
                 robot
                     .set_joint_positions(rigid, &q)
                     .map_err(|e| e.to_string())?;
-                let iso = planar_move(centre, Vector3::new(dx, dy, 0.0), dyaw);
                 for c in carry {
                     move_object(c, &iso)?;
                 }
