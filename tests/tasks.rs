@@ -136,32 +136,43 @@ fn curtain_success_and_frame_contact_on_constructed_states() {
 
 #[test]
 fn every_action_mode_resets_and_steps() {
+    // (modes with V for the robot's base velocity mode, action size Franka, Spot).
     let modes = [
-        ("(base: Velocity, arm: EePoseDelta, gripper: Off)", 9),
-        ("(base: Velocity, arm: EePoseAbsolute, gripper: Binary)", 10),
-        ("(base: Velocity, arm: JointDelta, gripper: Binary)", 11),
-        ("(base: Velocity, arm: JointPosition, gripper: Off)", 10),
-        ("(base: Off, arm: Off, gripper: Binary)", 1),
-        ("(discrete: true)", 1),
+        ("(base: V, arm: EePoseDelta, gripper: Off)", 9, 9),
+        ("(base: V, arm: EePoseAbsolute, gripper: Binary)", 10, 10),
+        ("(base: V, arm: JointDelta, gripper: Binary)", 11, 10),
+        ("(base: V, arm: JointPosition, gripper: Off)", 10, 9),
+        ("(base: Off, arm: Off, gripper: Binary)", 1, 1),
+        ("(discrete: true)", 1, 1),
+        ("(base: LegJoints, arm: Off, gripper: Off)", 0, 12),
     ];
-    for (id, (m, dim)) in modesuite::tasks::IMPLEMENTED
-        .iter()
-        .flat_map(|id| modes.iter().map(move |m| (*id, *m)))
-    {
-        let mut env = make(id, Some(m));
-        assert_eq!(env.spaces().action.flat_dim(), dim, "{id} {m}");
-        let obs_dim = env.spaces().observation.flat_dim();
-        let mut policy = make_policy(PolicyKind::Random, &env).unwrap();
-        policy.reset(3);
-        let mut a = vec![0.0; dim];
-        for _ in 0..20 {
-            policy.act(&env, &mut a).unwrap();
-            let o = env.step(&a);
-            assert!(o.info.error.is_none(), "{id} {m}: {:?}", o.info.error);
-            assert_eq!(o.observation.len(), obs_dim);
+    for id in modesuite::tasks::IMPLEMENTED {
+        let spot = id.contains("Spot");
+        for (m, franka_dim, spot_dim) in modes {
+            let dim = if spot { spot_dim } else { franka_dim };
+            if dim == 0 {
+                continue;
+            }
+            let m = m.replace("V", if spot { "Locomotion" } else { "Velocity" });
+            check_mode(id, &m, dim);
         }
-        env.reset(Some(1));
     }
+}
+
+fn check_mode(id: &str, m: &str, dim: usize) {
+    let mut env = make(id, Some(m));
+    assert_eq!(env.spaces().action.flat_dim(), dim, "{id} {m}");
+    let obs_dim = env.spaces().observation.flat_dim();
+    let mut policy = make_policy(PolicyKind::Random, &env).unwrap();
+    policy.reset(3);
+    let mut a = vec![0.0; dim];
+    for _ in 0..20 {
+        policy.act(&env, &mut a).unwrap();
+        let o = env.step(&a);
+        assert!(o.info.error.is_none(), "{id} {m}: {:?}", o.info.error);
+        assert_eq!(o.observation.len(), obs_dim);
+    }
+    env.reset(Some(1));
 }
 
 #[test]
