@@ -289,6 +289,24 @@ struct RegionParams {
     /// Only particles higher than this count, m (fraction terms).
     #[serde(default)]
     above: Option<f64>,
+    /// Makes the term a predicate: 1 when the fraction is at most this, else 0.
+    #[serde(default)]
+    at_most: Option<f64>,
+    /// Makes the term a predicate: 1 when the fraction is at least this, else 0.
+    #[serde(default)]
+    at_least: Option<f64>,
+}
+
+impl RegionParams {
+    /// The fraction, or the predicate when `at_most` / `at_least` is given.
+    fn output(&self, fraction: f64) -> f64 {
+        match (self.at_most, self.at_least) {
+            (Some(hi), _) if fraction > hi => 0.0,
+            (_, Some(lo)) if fraction < lo => 0.0,
+            (None, None) => fraction,
+            _ => 1.0,
+        }
+    }
 }
 
 #[derive(Deserialize)]
@@ -528,7 +546,7 @@ pub fn register_library(app: &mut SimApp) {
         app,
         "cloth_fraction_above",
         Termination,
-        "fraction of a cloth's particles over the xy rectangle [min, max] (and higher than `above`)",
+        "fraction of a cloth's particles over the xy rectangle [min, max] (higher than `above`); with `at_most`/`at_least` a 0/1 predicate",
         factory(|p: RegionParams, cfg| {
             cfg.object(&p.object)?;
             let region = region(&p)?;
@@ -539,7 +557,7 @@ pub fn register_library(app: &mut SimApp) {
                     .iter()
                     .filter(|q| region.contains_xy(q) && q.z > above)
                     .count();
-                out[0] = k as f64 / pos.len().max(1) as f64;
+                out[0] = p.output(k as f64 / pos.len().max(1) as f64);
                 Ok(())
             }))
         }),
@@ -548,13 +566,13 @@ pub fn register_library(app: &mut SimApp) {
         app,
         "cloth_coverage",
         Termination,
-        "fraction of the xy rectangle [min, max] covered by a cloth's xy projection",
+        "fraction of the xy rectangle [min, max] covered by a cloth's xy projection; with `at_most`/`at_least` a 0/1 predicate",
         factory(|p: RegionParams, cfg| {
             cfg.object(&p.object)?;
             let region = region(&p)?;
             Ok(term(1, move |c, out| {
                 let cloth = c.cloth(&p.object)?;
-                out[0] = cloth.covered_area(&region, 40) / region.area();
+                out[0] = p.output(cloth.covered_area(&region, 40) / region.area());
                 Ok(())
             }))
         }),
