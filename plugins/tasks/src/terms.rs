@@ -642,3 +642,38 @@ impl TaskTerm for JointStates {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn region(at_most: Option<f64>, at_least: Option<f64>) -> RegionParams {
+        RegionParams {
+            object: "cloth".into(),
+            min: (0.0, 0.0),
+            max: (1.0, 1.0),
+            above: None,
+            at_most,
+            at_least,
+        }
+    }
+
+    #[test]
+    fn region_terms_are_fractions_or_predicates() {
+        assert_eq!(region(None, None).output(0.3), 0.3);
+        assert_eq!(region(Some(0.05), None).output(0.04), 1.0);
+        assert_eq!(region(Some(0.05), None).output(0.06), 0.0);
+        assert_eq!(region(None, Some(0.9)).output(0.95), 1.0);
+        assert_eq!(region(None, Some(0.9)).output(0.85), 0.0);
+    }
+
+    #[test]
+    fn tracked_nodes_spread_along_the_longest_axis() {
+        let rest: Vec<Vector3<f64>> = (0..=10)
+            .flat_map(|i| [-0.01, 0.01].map(move |y| Vector3::new(i as f64 * 0.1 - 0.5, y, 0.0)))
+            .collect();
+        let ids = tracked_nodes(&rest, 3);
+        let xs: Vec<f64> = ids.iter().map(|&i| rest[i as usize].x).collect();
+        assert_eq!(xs, [-0.5, 0.0, 0.5]);
+    }
+}
