@@ -247,7 +247,9 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         };
         let mut env = make()?;
         let zero = vec![0.0f32; env.spaces().action.flat_dim()];
-        let n = steps(600.0, opts);
+        // The same window of the episode for 1 and 16 envs, so `overhead` compares like with
+        // like.
+        let n = steps(300.0, opts);
         let t = Instant::now();
         for _ in 0..n {
             if let Some(e) = env.step(&zero).info.error {
@@ -258,7 +260,7 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         let mut extra = BTreeMap::new();
         extra.insert("task".into(), json!(id));
         out.push(BenchRecord::new(id, single, 1, 1, extra));
-        let m = steps(150.0, opts);
+        let m = n;
         for threads in thread_counts(opts)? {
             let envs = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
             let mut venv =

@@ -74,6 +74,25 @@ fn ids_resolve_and_unimplemented_ones_say_so() {
 }
 
 #[test]
+fn observation_and_action_sizes_match_docs_tasks_md() {
+    // docs/tasks.md: (id, observation, default action).
+    for (id, obs, act) in [
+        ("MoDe-Franka-Place-v0", 43, 9),
+        ("MoDe-Franka-Curtain-v0", 43, 10),
+        ("MoDe-Spot-Curtain-v0", 41, 10),
+    ] {
+        let env = make(id, None);
+        let s = env.spaces();
+        assert_eq!(
+            (s.observation.flat_dim(), s.action.flat_dim()),
+            (obs, act),
+            "{id}"
+        );
+        assert_eq!(env.observation().len(), obs);
+    }
+}
+
+#[test]
 fn place_spaces_match_the_documented_layout() {
     let env = make(PLACE, None);
     let s = env.spaces();
