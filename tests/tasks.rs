@@ -78,6 +78,7 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
     // docs/tasks.md: (id, observation, default action).
     for (id, obs, act) in [
         ("MoDe-Franka-Place-v0", 43, 9),
+        ("MoDe-Spot-Place-v0", 41, 9),
         ("MoDe-Franka-Curtain-v0", 43, 10),
         ("MoDe-Spot-Curtain-v0", 41, 10),
     ] {

@@ -123,15 +123,18 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
             }
             match name.as_str() {
                 "place" => {
-                    if !matches!(modes.base, BaseMode::Velocity)
+                    if !matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion)
                         || !matches!(modes.arm, ArmMode::EePoseDelta | ArmMode::EePoseAbsolute)
                     {
                         return Err(format!(
-                            "the place expert drives base: Velocity and arm: EePoseDelta or EePoseAbsolute; this run has base {:?}, arm {:?}",
+                            "the place expert drives base: Velocity or Locomotion and arm: EePoseDelta or EePoseAbsolute; this run has base {:?}, arm {:?}",
                             modes.base, modes.arm
                         ));
                     }
-                    Ok(Box::new(PlaceExpert { robot }))
+                    Ok(Box::new(PlaceExpert {
+                        robot,
+                        start_z: None,
+                    }))
                 }
                 "curtain" => {
                     if !matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion)
@@ -226,9 +229,15 @@ fn write_action(
 /// hangs 8 cm above the table top.
 struct PlaceExpert {
     robot: String,
+    /// Hand height target at the start of the episode (base frame).
+    start_z: Option<f64>,
 }
 
 impl Policy for PlaceExpert {
+    fn reset(&mut self, _seed: u64) {
+        self.start_z = None;
+    }
+
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
         let rt = robot_of(env, &self.robot)?;
         let end = point(env, "rod_end")?;
@@ -241,18 +250,28 @@ impl Policy for PlaceExpert {
         if v.norm() > 0.5 {
             v *= 0.5 / v.norm();
         }
-        // Hand: 0.55 m ahead of the base; its height follows the end's height error at up to
-        // 0.25 m/s (an integrator on the target, rate-limited so it cannot wind up ahead of the
-        // arm in the absolute mode).
+        // Hand: where it started in the base frame (x), centred (y); its height follows the
+        // end's height error at up to 0.25 m/s (an integrator on the target, rate-limited so it
+        // cannot wind up ahead of the arm in the absolute mode), within 0.4 m of the start.
         let s = env.app.world.resource::<SimSettings>();
         let dt = s.dt * f64::from(s.decimation);
         let cur = rt.ee_target.translation.vector;
+        if env
+            .app
+            .world
+            .resource::<modesuite_engine::SimClock>()
+            .episode_steps
+            == 0
+        {
+            self.start_z = None;
+        }
         let dz = (3.0 * (table.z + 0.08 - end.z)).clamp(-0.25, 0.25) * dt;
         let step = |from: f64, to: f64| from + (to - from).clamp(-0.25 * dt, 0.25 * dt);
+        let z0 = self.start_z.get_or_insert(cur.z);
         let ee = Vector3::new(
-            step(cur.x, 0.55),
+            cur.x,
             step(cur.y, 0.0),
-            (cur.z + dz).clamp(0.4, 1.25),
+            (cur.z + dz).clamp(*z0 - 0.4, *z0 + 0.4),
         );
         // The rod is attached to the hand; the fingers stay open around it (closing them would
         // squeeze the 7 cm rod).

@@ -45,8 +45,9 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 3] = [
+pub const IMPLEMENTED: [&str; 4] = [
     "MoDe-Franka-Place-v0",
+    "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
     "MoDe-Spot-Curtain-v0",
 ];
@@ -99,6 +100,10 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "place/franka.scene.ron",
         include_str!("../../../scenes/place/franka.scene.ron"),
+    ),
+    (
+        "place/spot.scene.ron",
+        include_str!("../../../scenes/place/spot.scene.ron"),
     ),
     (
         "curtain/curtain.task.ron",
