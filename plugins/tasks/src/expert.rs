@@ -131,10 +131,7 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                             modes.base, modes.arm
                         ));
                     }
-                    Ok(Box::new(PlaceExpert {
-                        robot,
-                        start_z: None,
-                    }))
+                    Ok(Box::new(PlaceExpert { robot, start: None }))
                 }
                 "curtain" => {
                     if !matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion)
@@ -229,13 +226,13 @@ fn write_action(
 /// hangs 8 cm above the table top.
 struct PlaceExpert {
     robot: String,
-    /// Hand height target at the start of the episode (base frame).
-    start_z: Option<f64>,
+    /// Hand target at the start of the episode (base frame).
+    start: Option<Vector3<f64>>,
 }
 
 impl Policy for PlaceExpert {
     fn reset(&mut self, _seed: u64) {
-        self.start_z = None;
+        self.start = None;
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
@@ -250,9 +247,10 @@ impl Policy for PlaceExpert {
         if v.norm() > 0.5 {
             v *= 0.5 / v.norm();
         }
-        // Hand: where it started in the base frame (x), centred (y); its height follows the
-        // end's height error at up to 0.25 m/s (an integrator on the target, rate-limited so it
-        // cannot wind up ahead of the arm in the absolute mode), within 0.4 m of the start.
+        // Hand: 5 cm ahead of where it started in the base frame (x), centred (y); its height
+        // follows the end's height error at up to 0.25 m/s (an integrator on the target,
+        // rate-limited so it cannot wind up ahead of the arm in the absolute mode), within
+        // -0.4 .. +0.7 m of the start.
         let s = env.app.world.resource::<SimSettings>();
         let dt = s.dt * f64::from(s.decimation);
         let cur = rt.ee_target.translation.vector;
@@ -263,15 +261,15 @@ impl Policy for PlaceExpert {
             .episode_steps
             == 0
         {
-            self.start_z = None;
+            self.start = None;
         }
         let dz = (3.0 * (table.z + 0.08 - end.z)).clamp(-0.25, 0.25) * dt;
         let step = |from: f64, to: f64| from + (to - from).clamp(-0.25 * dt, 0.25 * dt);
-        let z0 = self.start_z.get_or_insert(cur.z);
+        let start = *self.start.get_or_insert(cur);
         let ee = Vector3::new(
-            cur.x,
+            step(cur.x, start.x + 0.05),
             step(cur.y, 0.0),
-            (cur.z + dz).clamp(*z0 - 0.4, *z0 + 0.4),
+            (cur.z + dz).clamp(start.z - 0.4, start.z + 0.7),
         );
         // The rod is attached to the hand; the fingers stay open around it (closing them would
         // squeeze the 7 cm rod).
