@@ -53,6 +53,28 @@ fn scene_error(text: &str) -> String {
     }
 }
 
+/// The Franka Place scene file with `from` replaced by `to`.
+fn place_text(from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place/franka.scene.ron"),
+    )
+    .unwrap();
+    assert!(text.contains(from), "{from}");
+    text.replace(from, to)
+}
+
+/// An app with `text` (a scene in scenes/place) compiled and spawned.
+fn place_app(text: &str) -> modesuite::engine::SimApp {
+    let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
+    let mut app = modesuite::cli::default_app();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
+    let model = app
+        .compile_scene(&desc, &SceneSource::in_memory(dir))
+        .unwrap();
+    app.spawn_scene(model).unwrap();
+    app
+}
+
 #[test]
 fn ids_resolve_and_unimplemented_ones_say_so() {
     let ids = modesuite::tasks::all_ids();
@@ -326,11 +348,7 @@ fn expert_seeds(id: &str, seeds: &[u64]) {
 #[test]
 fn task_section_errors_name_the_entry() {
     let scene = |task: &str| {
-        std::fs::read_to_string(
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place/franka.scene.ron"),
-        )
-        .unwrap()
-        .replace(
+        place_text(
             r#"events: {"robot_start": RobotPose(xy: 0.1, yaw: 0.1, carry: ["rod"])},"#,
             task,
         )
@@ -357,17 +375,9 @@ fn task_section_errors_name_the_entry() {
     let e = scene_error(&scene(r#"events: {"e": RobotPose(xy: -1.0, yaw: 0.1)},"#));
     assert!(e.contains(r#"events["e"]"#), "{e}");
     // An override of the parent's reward by name.
-    let desc = modesuite::engine::scene::parse_str(
-        &scene(r#"rewards: {"base_to_target": (term: "distance", weight: -0.5, params: (a: Base, b: Target("table"), planar: true))},"#),
-        "<test>",
-    )
-    .unwrap();
-    let mut app = modesuite::cli::default_app();
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
-    let model = app
-        .compile_scene(&desc, &SceneSource::in_memory(dir))
-        .unwrap();
-    app.spawn_scene(model).unwrap();
+    let app = place_app(&scene(
+        r#"rewards: {"base_to_target": (term: "distance", weight: -0.5, params: (a: Base, b: Target("table"), planar: true))},"#,
+    ));
     let task = app.world.resource::<modesuite::tasks::Task>();
     let w: Vec<(String, f64)> = task
         .model
@@ -397,19 +407,8 @@ fn a_task_env_has_no_ambiguous_systems() {
 
 #[test]
 fn a_failing_reset_event_is_reported_and_ends_the_first_step() {
-    let text = std::fs::read_to_string(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place/franka.scene.ron"),
-    )
-    .unwrap()
-    .replace(r#"carry: ["rod"]"#, r#"carry: ["table"]"#);
-    let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
-    let mut app = modesuite::cli::default_app();
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
-    let model = app
-        .compile_scene(&desc, &SceneSource::in_memory(dir))
-        .unwrap();
-    app.spawn_scene(model).unwrap();
-    let mut env = Env::new(app);
+    let text = place_text(r#"carry: ["rod"]"#, r#"carry: ["table"]"#);
+    let mut env = Env::new(place_app(&text));
     let (_, info) = env.reset(Some(0));
     let e = info.error.expect("the reset reports the failed event");
     println!("{e}");
