@@ -427,3 +427,45 @@ fn a_failing_reset_event_is_reported_and_ends_the_first_step() {
                 .contains("robot_start")
     );
 }
+
+#[test]
+fn cloth_region_terms_measure_the_napkin() {
+    // The napkin (0.3 x 0.3 m at (0.82, 0), flat on the table) of the grasp example, observed
+    // by a task section added to the scene.
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("scenes/examples/franka_cloth_grasp.scene.ron"),
+    )
+    .unwrap()
+    .replace(
+        r#""robots": ["#,
+        r#""task": (observations: {"policy": (terms: [
+            (term: "cloth_fraction_above", params: (object: "napkin", min: (0.6, -0.3), max: (1.2, 0.3))),
+            (term: "cloth_fraction_above", params: (object: "napkin", min: (0.6, -0.3), max: (0.82, 0.3), above: 0.4)),
+            (term: "cloth_coverage", params: (object: "napkin", min: (0.72, -0.1), max: (0.92, 0.1))),
+            (term: "cloth_coverage", params: (object: "napkin", min: (2.0, 2.0), max: (2.5, 2.5), at_least: 0.5)),
+            (term: "cloth_fraction_above", params: (object: "napkin", min: (0.6, -0.3), max: (1.2, 0.3), at_most: 0.05)),
+        ])}),
+        "robots": ["#,
+    );
+    let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
+    let mut app = modesuite::cli::default_app();
+    let model = app
+        .compile_scene(&desc, &SceneSource::in_memory("."))
+        .unwrap();
+    app.spawn_scene(model).unwrap();
+    let mut env = Env::new(app);
+    let (o, _) = env.reset(Some(0));
+    println!("napkin terms: {o:?}");
+    assert_eq!(o.len(), 5);
+    assert_eq!(o[0], 1.0, "every particle over the table");
+    // 13 x 13 particles, columns at x = 0.67 + 0.025 i: those with x <= 0.82 are 7 of 13.
+    assert!((o[1] - 7.0 / 13.0).abs() < 1e-6, "{}", o[1]);
+    assert!(
+        o[2] > 0.99,
+        "the region inside the napkin is covered: {}",
+        o[2]
+    );
+    assert_eq!(o[3], 0.0, "a far region is not");
+    assert_eq!(o[4], 0.0, "at_most 0.05 does not hold");
+}

@@ -547,19 +547,14 @@ pub fn register_library(app: &mut SimApp) {
         "cloth_fraction_above",
         Termination,
         "fraction of a cloth's particles over the xy rectangle [min, max] (higher than `above`); with `at_most`/`at_least` a 0/1 predicate",
-        factory(|p: RegionParams, cfg| {
-            cfg.object(&p.object)?;
-            let region = region(&p)?;
+        cloth_region_term(|cloth, region, p| {
             let above = p.above.unwrap_or(f64::NEG_INFINITY);
-            Ok(term(1, move |c, out| {
-                let pos = c.cloth(&p.object)?.positions();
-                let k = pos
-                    .iter()
-                    .filter(|q| region.contains_xy(q) && q.z > above)
-                    .count();
-                out[0] = p.output(k as f64 / pos.len().max(1) as f64);
-                Ok(())
-            }))
+            let pos = cloth.positions();
+            let k = pos
+                .iter()
+                .filter(|q| region.contains_xy(q) && q.z > above)
+                .count();
+            k as f64 / pos.len().max(1) as f64
         }),
     );
     reg(
@@ -567,15 +562,7 @@ pub fn register_library(app: &mut SimApp) {
         "cloth_coverage",
         Termination,
         "fraction of the xy rectangle [min, max] covered by a cloth's xy projection; with `at_most`/`at_least` a 0/1 predicate",
-        factory(|p: RegionParams, cfg| {
-            cfg.object(&p.object)?;
-            let region = region(&p)?;
-            Ok(term(1, move |c, out| {
-                let cloth = c.cloth(&p.object)?;
-                out[0] = p.output(cloth.covered_area(&region, 40) / region.area());
-                Ok(())
-            }))
-        }),
+        cloth_region_term(|cloth, region, _| cloth.covered_area(region, 40) / region.area()),
     );
     reg(
         app,
@@ -604,6 +591,21 @@ pub fn register_library(app: &mut SimApp) {
             }))
         }),
     );
+}
+
+/// A term over a cloth and an xy region: `f` gives the fraction, [`RegionParams::output`] turns
+/// it into the term's value.
+fn cloth_region_term(
+    f: impl Fn(&Cloth, &Region, &RegionParams) -> f64 + Send + Sync + Copy + 'static,
+) -> Arc<dyn TaskTermFactory> {
+    factory(move |p: RegionParams, cfg| {
+        cfg.object(&p.object)?;
+        let region = region(&p)?;
+        Ok(term(1, move |c, out| {
+            out[0] = p.output(f(c.cloth(&p.object)?, &region, &p));
+            Ok(())
+        }))
+    })
 }
 
 fn region(p: &RegionParams) -> Result<Region, String> {
