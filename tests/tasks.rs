@@ -469,3 +469,42 @@ fn cloth_region_terms_measure_the_napkin() {
     assert_eq!(o[3], 0.0, "a far region is not");
     assert_eq!(o[4], 0.0, "at_most 0.05 does not hold");
 }
+
+#[test]
+fn friction_randomisation_stays_in_range_and_follows_the_seed() {
+    let text = place_text(
+        r#"events: {"robot_start""#,
+        r#"events: {"table_friction": Friction(object: "table", range: (0.3, 0.9)), "robot_start""#,
+    );
+    let mut env = Env::new(place_app(&text));
+    let friction = |env: &mut Env| {
+        use modesuite::engine::components::Object;
+        use modesuite::engine::rigid::RigidRef;
+        let mut q = env.app.world.query::<(&Object, &RigidRef)>();
+        let h = q
+            .iter(&env.app.world)
+            .find(|(o, _)| o.name == "table")
+            .unwrap()
+            .1
+             .0;
+        let ctx = env.app.world.resource::<RigidContext>();
+        let c = ctx.bodies.get(h).unwrap().colliders()[0];
+        ctx.colliders.get(c).unwrap().friction()
+    };
+    let mut seen = Vec::new();
+    for seed in 0..6 {
+        env.reset(Some(seed));
+        let f = friction(&mut env);
+        assert!((0.3..=0.9).contains(&f), "{f}");
+        seen.push(f);
+    }
+    println!("table friction per seed: {seen:?}");
+    env.reset(Some(2));
+    assert_eq!(friction(&mut env), seen[2]);
+    assert!(seen.windows(2).all(|w| w[0] != w[1]));
+    let e = scene_error(&place_text(
+        r#"events: {"robot_start""#,
+        r#"events: {"f": Friction(object: "table", range: (0.9, 0.3)), "robot_start""#,
+    ));
+    assert!(e.contains(r#"events["f"].range"#), "{e}");
+}

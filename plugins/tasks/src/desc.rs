@@ -147,6 +147,14 @@ pub enum EventDesc {
         #[serde(default)]
         carry: Vec<String>,
     },
+    /// Sets the friction coefficient of every collider of a rigid object (robot links by their
+    /// `robot/link` names) to a uniform value in `range`.
+    Friction {
+        /// Object name.
+        object: String,
+        /// (lowest, highest) friction coefficient.
+        range: (f64, f64),
+    },
     /// Translates a deformable object by a uniform offset `+- xy` in x and y.
     ObjectOffset {
         /// Object name.

@@ -19,6 +19,7 @@ use modesuite_engine::components::{DeformableNodes, Object, Pose};
 use modesuite_engine::env::{ActionBuffer, ObservationBuffer, StepSignals};
 use modesuite_engine::math::{pose_from_rapier, pose_to_rapier};
 use modesuite_engine::registry::{CompiledSection, SceneSection, SectionCompileContext};
+use modesuite_engine::rigid::RigidRef;
 use modesuite_engine::rng::EnvRng;
 use modesuite_engine::scene::SceneError;
 use modesuite_engine::state::{StateHasher, Stateful};
@@ -462,6 +463,18 @@ impl SceneSection for TaskSection {
                     for c in carry {
                         cfg.object(c)
                             .map_err(|m| serr(&format!("{epath}.carry"), c.clone(), m))?;
+                    }
+                }
+                EventDesc::Friction { object, range } => {
+                    cfg.object(object)
+                        .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+                    let (lo, hi) = *range;
+                    if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi) {
+                        return Err(serr(
+                            &format!("{epath}.range"),
+                            format!("{range:?}"),
+                            "finite (lowest, highest) with 0 <= lowest <= highest",
+                        ));
                     }
                 }
                 EventDesc::ObjectOffset { object, xy } => {
@@ -989,6 +1002,7 @@ fn task_reset(
     mut fem: Option<ResMut<FemContext>>,
     mut pbd: Option<ResMut<PbdContext>>,
     mut nodes: Query<(Entity, &Object, &mut DeformableNodes)>,
+    bodies: Query<(&Object, &RigidRef)>,
     mut errors: ResMut<SimErrors>,
 ) {
     let (Some(task), Some(state), Some(robots), Some(rigid)) =
@@ -1077,6 +1091,25 @@ fn task_reset(
                     .map_err(|e| e.to_string())?;
                 for c in carry {
                     move_object(c, &iso)?;
+                }
+                Ok(())
+            }
+            EventDesc::Friction { object, range } => {
+                let f = rng.range(range.0, range.1);
+                let (_, body) = bodies
+                    .iter()
+                    .find(|(o, _)| o.name == *object)
+                    .ok_or_else(|| format!("object \"{object}\" is not a rigid body"))?;
+                let colliders: Vec<_> = rigid
+                    .bodies
+                    .get(body.0)
+                    .ok_or_else(|| format!("object \"{object}\": its body is gone"))?
+                    .colliders()
+                    .to_vec();
+                for c in colliders {
+                    if let Some(c) = rigid.colliders.get_mut(c) {
+                        c.set_friction(f as f32);
+                    }
                 }
                 Ok(())
             }
