@@ -271,6 +271,13 @@ fn reset_randomisation_stays_in_range_and_is_deterministic_per_seed() {
         assert!((d - 1.30).abs() < 0.02, "rod end {d:.3} m from the base");
         seen.push((seed, env.state_hash(), t.x));
     }
+    // The randomised target is published as a named frame (drawn as a marker).
+    let frames = env
+        .app
+        .world
+        .resource::<modesuite::engine::scene::NamedFrames>();
+    let marker = frames.0["target/table"].translation.vector;
+    assert_eq!(marker, point(&env, "table"));
     let again: Vec<u64> = (0..12u64)
         .map(|s| {
             env.reset(Some(s));

@@ -21,7 +21,7 @@ use modesuite_engine::math::{pose_from_rapier, pose_to_rapier};
 use modesuite_engine::registry::{CompiledSection, SceneSection, SectionCompileContext};
 use modesuite_engine::rigid::RigidRef;
 use modesuite_engine::rng::EnvRng;
-use modesuite_engine::scene::SceneError;
+use modesuite_engine::scene::{NamedFrames, SceneError};
 use modesuite_engine::state::{StateHasher, Stateful};
 use modesuite_engine::terms::{world_view, ViewQuery};
 use modesuite_engine::{
@@ -1003,6 +1003,7 @@ fn task_reset(
     mut pbd: Option<ResMut<PbdContext>>,
     mut nodes: Query<(Entity, &Object, &mut DeformableNodes)>,
     bodies: Query<(&Object, &RigidRef)>,
+    mut frames: Option<ResMut<NamedFrames>>,
     mut errors: ResMut<SimErrors>,
 ) {
     let (Some(task), Some(state), Some(robots), Some(rigid)) =
@@ -1024,6 +1025,15 @@ fn task_reset(
             }
         }
         state.targets[i] = p;
+    }
+    // The targets as named frames `target/<name>`: renderers draw them as markers.
+    if let Some(frames) = frames.as_deref_mut() {
+        for ((name, _), p) in m.targets.iter().zip(&state.targets) {
+            frames.0.insert(
+                format!("target/{name}"),
+                Isometry3::translation(p.x, p.y, p.z),
+            );
+        }
     }
     // Moves a deformable rigidly (solver and its nodes component).
     let mut move_object = |name: &str, iso: &Isometry3<f64>| -> Result<(), String> {
