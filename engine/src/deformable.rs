@@ -51,20 +51,84 @@ pub trait DeformableSolver: Send + Sync + 'static {
         let _ = forces;
         Err("this solver does not accept passive forces".to_string())
     }
-    /// Brings the solver's rigid frames up to date before a step: `pose_of` gives the current
-    /// pose of any body id (attachments and grasps follow their bodies), and `grippers` is the
-    /// level-triggered gripper state of the env ([`Grippers`]): a closed gripper holding nothing
-    /// of this body grasps what lies inside its finger volume; an open one releases what it
-    /// holds. Grasps belong to the solver's state, so snapshots carry them. Default: the solver
-    /// has no rigid frames (nothing to do).
-    fn sync_rigid(
+    /// Moves the solver's body-attached frames (attachments, grasps) to the current poses of
+    /// their bodies; `pose_of` gives the pose of any body id. Default: no rigid frames.
+    fn follow_bodies(
         &mut self,
-        grippers: &[GripperState],
         pose_of: &dyn Fn(u32) -> Option<Isometry3<f64>>,
     ) -> Result<(), String> {
-        let _ = (grippers, pose_of);
+        let _ = pose_of;
         Ok(())
     }
+    /// Whether rigid body `body` holds a grasp of this body. Default: never.
+    fn grasped_by(&self, body: u32) -> bool {
+        let _ = body;
+        false
+    }
+    /// Grasps what lies inside `volume` (world frame) with rigid body `body`, currently at
+    /// `pose`, up to `force_limit` N; nothing when nothing is inside. Default: not graspable.
+    fn grasp_volume(
+        &mut self,
+        body: u32,
+        pose: &Isometry3<f64>,
+        volume: &FingerVolume,
+        force_limit: f64,
+    ) -> Result<(), String> {
+        let _ = (body, pose, volume, force_limit);
+        Ok(())
+    }
+    /// Releases every grasp held by rigid body `body`. Default: nothing to release.
+    fn release_body(&mut self, body: u32) -> Result<(), String> {
+        let _ = body;
+        Ok(())
+    }
+}
+
+/// A gripper's finger volume in the world frame: an oriented box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FingerVolume {
+    /// Pose of the box centre, world frame.
+    pub pose: Isometry3<f64>,
+    /// Half extents along the box axes, m.
+    pub half_extents: Vector3<f64>,
+}
+
+impl FingerVolume {
+    /// Whether `p` (world frame) is inside or on the box.
+    pub fn contains(&self, p: &Vector3<f64>) -> bool {
+        let l = self
+            .pose
+            .inverse_transform_point(&nalgebra::Point3::from(*p));
+        let h = self.half_extents;
+        l.x.abs() <= h.x && l.y.abs() <= h.y && l.z.abs() <= h.z
+    }
+}
+
+/// Brings a solver's rigid frames and grasps up to date before a step. Grippers are
+/// level-triggered ([`Grippers`]): a closed gripper whose body holds nothing of this body grasps
+/// what lies inside its finger volume; an open one releases what its body holds. Grasps belong
+/// to the solver's state, so snapshots and resets carry them.
+fn sync_grippers<S: DeformableSolver>(
+    solver: &mut S,
+    grippers: &[GripperState],
+    pose_of: &dyn Fn(u32) -> Option<Isometry3<f64>>,
+) -> Result<(), String> {
+    solver.follow_bodies(pose_of)?;
+    for g in grippers {
+        let Some(pose) = pose_of(g.body) else {
+            continue;
+        };
+        if !g.closed {
+            solver.release_body(g.body)?;
+        } else if !solver.grasped_by(g.body) {
+            let volume = FingerVolume {
+                pose: pose * g.volume_pose,
+                half_extents: g.half_extents,
+            };
+            solver.grasp_volume(g.body, &pose, &volume, g.force_limit)?;
+        }
+    }
+    Ok(())
 }
 
 /// One deformable body of an env.
@@ -206,7 +270,7 @@ fn deformable_step<S: DeformableSolver>(
         }
         if let Some(r) = rigid.as_deref() {
             let grippers = grippers.as_deref().map_or(&[][..], |g| &g.0);
-            if let Err(e) = body.solver.sync_rigid(grippers, &|id| r.body_pose(id)) {
+            if let Err(e) = sync_grippers(&mut body.solver, grippers, &|id| r.body_pose(id)) {
                 let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
                 errors.raise(format!("object \"{name}\": {e}"));
                 continue;

@@ -42,6 +42,14 @@ pub struct StepSignals {
     pub values: BTreeMap<String, f64>,
 }
 
+impl StepSignals {
+    /// Adds `value` to the step reward and to its `reward/<term>` diagnostic.
+    pub fn add_reward(&mut self, term: &str, value: f64) {
+        self.reward += value;
+        *self.values.entry(format!("reward/{term}")).or_default() += value;
+    }
+}
+
 /// A space, as Gymnasium declares them.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Space {

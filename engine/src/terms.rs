@@ -245,12 +245,17 @@ fn evaluate_into(
     out.resize(term.dim(), 0.0);
     term.evaluate(ctx, out)
         .map_err(|e| format!("{section} term \"{name}\": {e}"))?;
-    if let Some((i, v)) = out.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(format!(
+    check_finite(section, name, out)
+}
+
+/// The error for the first non-finite value a term returned: terms must return finite values.
+pub fn check_finite(section: &str, name: &str, out: &[f64]) -> Result<(), String> {
+    match out.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        Some((i, v)) => Err(format!(
             "{section} term \"{name}\": value [{i}] = {v}: terms must return finite values"
-        ));
+        )),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// The scene's reward and termination terms (in `EngineSystems::TimeLimit`, before the limit).
@@ -276,14 +281,7 @@ pub(crate) fn evaluate_scene_terms(
     let mut out = Vec::new();
     for r in &terms.rewards {
         match evaluate_into("reward", &r.name, r.term.as_ref(), &mut ctx, &mut out) {
-            Ok(()) => {
-                let v = r.weight * out[0];
-                signals.reward += v;
-                *signals
-                    .values
-                    .entry(format!("reward/{}", r.name))
-                    .or_default() += v;
-            }
+            Ok(()) => signals.add_reward(&r.name, r.weight * out[0]),
             Err(e) => errors.raise(e),
         }
     }

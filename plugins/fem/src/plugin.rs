@@ -21,8 +21,10 @@
 use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
-use modesuite_engine::coupling::{ContactQuery, GripperState, Reaction};
-use modesuite_engine::deformable::{add_deformable_systems, DeformableContext, DeformableSolver};
+use modesuite_engine::coupling::{ContactQuery, Reaction};
+use modesuite_engine::deformable::{
+    add_deformable_systems, DeformableContext, DeformableSolver, FingerVolume,
+};
 use modesuite_engine::registry::{BodyCompileContext, BodyKind, CompiledBody};
 use modesuite_engine::scene::{NodeSelect, SceneError};
 use modesuite_engine::{DeformableSystems, Plugin, SimApp};
@@ -93,53 +95,45 @@ impl DeformableSolver for FemSolid {
     fn set_passive_forces(&mut self, forces: &[Vector3<f64>]) -> Result<(), String> {
         self.set_external_forces(forces).map_err(|e| e.to_string())
     }
-    fn sync_rigid(
+    fn follow_bodies(
         &mut self,
-        grippers: &[GripperState],
         pose_of: &dyn Fn(u32) -> Option<Isometry3<f64>>,
     ) -> Result<(), String> {
-        let err = |e: crate::FemError| e.to_string();
         for b in self.attached_bodies() {
             if let Some(p) = pose_of(b) {
-                self.set_body_pose(b, p).map_err(err)?;
+                self.set_body_pose(b, p).map_err(|e| e.to_string())?;
             }
         }
-        for g in grippers {
-            let Some(pose) = pose_of(g.body) else {
-                continue;
-            };
-            let held = self.grasps_of(g.body);
-            if !g.closed {
-                for id in held {
-                    self.release_grasp(id).map_err(err)?;
-                }
-                continue;
-            }
-            if !held.is_empty() {
-                continue;
-            }
-            let inv = (pose * g.volume_pose).inverse();
-            let h = g.half_extents;
-            let nodes = self.nodes_where(|p| {
-                let l = inv * Point3::from(*p);
-                l.x.abs() <= h.x && l.y.abs() <= h.y && l.z.abs() <= h.z
-            });
-            if nodes.is_empty() {
-                continue;
-            }
-            // Stiff enough that the grasp, not the spring, limits what the gripper transmits:
-            // the whole grasp holds its force limit at 2 mm of stretch.
-            let stiffness = (g.force_limit.min(1e4) / (0.002 * nodes.len() as f64)).max(1e3);
-            self.grasp(
-                g.body,
-                pose,
-                &nodes,
-                GraspParams {
-                    stiffness,
-                    force_limit: g.force_limit,
-                },
-            )
-            .map_err(err)?;
+        Ok(())
+    }
+    fn grasped_by(&self, body: u32) -> bool {
+        !self.grasps_of(body).is_empty()
+    }
+    fn grasp_volume(
+        &mut self,
+        body: u32,
+        pose: &Isometry3<f64>,
+        volume: &FingerVolume,
+        force_limit: f64,
+    ) -> Result<(), String> {
+        let nodes = self.nodes_where(|p| volume.contains(p));
+        if nodes.is_empty() {
+            return Ok(());
+        }
+        // Stiff enough that the grasp, not the spring, limits what the gripper transmits: the
+        // whole grasp holds its force limit at 2 mm of stretch.
+        let stiffness = (force_limit.min(1e4) / (0.002 * nodes.len() as f64)).max(1e3);
+        let params = GraspParams {
+            stiffness,
+            force_limit,
+        };
+        self.grasp(body, *pose, &nodes, params)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    }
+    fn release_body(&mut self, body: u32) -> Result<(), String> {
+        for id in self.grasps_of(body) {
+            self.release_grasp(id).map_err(|e| e.to_string())?;
         }
         Ok(())
     }

@@ -47,24 +47,9 @@ pub struct FrameId(pub u32);
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct AttachmentId(pub u32);
 
-/// An oriented box in the world frame (a gripper's finger volume).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OrientedBox {
-    /// Pose of the box centre, world frame.
-    pub pose: Isometry3<f64>,
-    /// Half extents along the box axes, m.
-    pub half_extents: Vector3<f64>,
-}
-
-impl OrientedBox {
-    /// Whether `p` (world frame) is inside or on the box.
-    pub fn contains(&self, p: &Vector3<f64>) -> bool {
-        let l = self.pose.inverse_transform_point(&Point3::from(*p));
-        l.x.abs() <= self.half_extents.x
-            && l.y.abs() <= self.half_extents.y
-            && l.z.abs() <= self.half_extents.z
-    }
-}
+/// An oriented box in the world frame (a gripper's finger volume): the engine's
+/// [`FingerVolume`](modesuite_engine::deformable::FingerVolume).
+pub use modesuite_engine::deformable::FingerVolume as OrientedBox;
 
 /// Per-step diagnostics returned by [`Cloth::step`].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

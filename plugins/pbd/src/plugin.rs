@@ -24,7 +24,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
-use modesuite_engine::coupling::{ContactQuery, GripperState, Reaction};
+use modesuite_engine::coupling::{ContactQuery, Reaction};
 use modesuite_engine::deformable::{add_deformable_systems, DeformableContext, DeformableSolver};
 use modesuite_engine::registry::{BodyCompileContext, BodyKind, CompiledBody};
 use modesuite_engine::scene::{NodeSelect, SceneError};
@@ -157,45 +157,47 @@ impl DeformableSolver for Cloth {
     fn node_velocities(&self) -> Option<&[Vector3<f64>]> {
         Some(self.velocities())
     }
-    fn sync_rigid(
+    fn follow_bodies(
         &mut self,
-        grippers: &[GripperState],
         pose_of: &dyn Fn(u32) -> Option<Isometry3<f64>>,
     ) -> Result<(), String> {
-        let err = |e: crate::PbdError| e.to_string();
         for (frame, body) in self.body_frames() {
             if let Some(p) = pose_of(body) {
-                self.set_frame_pose(frame, p).map_err(err)?;
+                self.set_frame_pose(frame, p).map_err(|e| e.to_string())?;
             }
         }
-        for g in grippers {
-            let Some(pose) = pose_of(g.body) else {
-                continue;
-            };
-            let frame = self.frame_of_body(g.body);
-            if !g.closed {
-                if let Some(f) = frame {
-                    for id in self.grasps_on(f) {
-                        self.release(id).map_err(err)?;
-                    }
-                }
-                continue;
+        Ok(())
+    }
+    fn grasped_by(&self, body: u32) -> bool {
+        self.frame_of_body(body)
+            .is_some_and(|f| !self.grasps_on(f).is_empty())
+    }
+    fn grasp_volume(
+        &mut self,
+        body: u32,
+        pose: &Isometry3<f64>,
+        volume: &OrientedBox,
+        force_limit: f64,
+    ) -> Result<(), String> {
+        let err = |e: crate::PbdError| e.to_string();
+        let frame = match self.frame_of_body(body) {
+            Some(f) => f,
+            // A frame only once something is inside, so grippers that never touch the cloth
+            // leave its state alone.
+            None if self.positions().iter().any(|p| volume.contains(p)) => {
+                self.add_frame(*pose, body).map_err(err)?
             }
-            let volume = OrientedBox {
-                pose: pose * g.volume_pose,
-                half_extents: g.half_extents,
-            };
-            let frame = match frame {
-                Some(f) if !self.grasps_on(f).is_empty() => continue,
-                Some(f) => f,
-                // A frame only once something is inside, so grippers that never touch the
-                // cloth leave its state alone.
-                None if self.positions().iter().any(|p| volume.contains(p)) => {
-                    self.add_frame(pose, g.body).map_err(err)?
-                }
-                None => continue,
-            };
-            self.grasp(frame, &volume, g.force_limit).map_err(err)?;
+            None => return Ok(()),
+        };
+        self.grasp(frame, volume, force_limit)
+            .map(|_| ())
+            .map_err(err)
+    }
+    fn release_body(&mut self, body: u32) -> Result<(), String> {
+        if let Some(f) = self.frame_of_body(body) {
+            for id in self.grasps_on(f) {
+                self.release(id).map_err(|e| e.to_string())?;
+            }
         }
         Ok(())
     }

@@ -7,7 +7,7 @@
 
 use modesuite_engine::rng::EnvRng;
 use modesuite_engine::{Env, RigidContext, SimSettings, Space};
-use modesuite_robots::{ArmMode, BaseMode, GripperMode, RobotRuntime, Robots};
+use modesuite_robots::{ArmMode, BaseMode, GripperMode, RobotObservation, RobotRuntime, Robots};
 use nalgebra::{UnitQuaternion, Vector2, Vector3};
 
 use crate::manager::{Task, TaskPoints};
@@ -169,24 +169,37 @@ fn point(env: &Env, name: &str) -> Result<Vector3<f64>, String> {
         .ok_or_else(|| format!("the task has no point or target named \"{name}\""))
 }
 
-/// Writes the base, arm and gripper parts: a world-frame base velocity (m/s, rad/s), an
-/// end-effector position target in the base frame (orientation held) and the gripper.
+/// The robot's state and its base heading (yaw, rad).
+fn observe(env: &Env, rt: &RobotRuntime) -> Result<(RobotObservation, f64), String> {
+    let obs = rt
+        .observe(env.app.world.resource::<RigidContext>())
+        .map_err(|e| e.to_string())?;
+    let (_, _, yaw) = obs.base.rotation.euler_angles();
+    Ok((obs, yaw))
+}
+
+/// Length of one env step, s.
+fn step_dt(env: &Env) -> f64 {
+    let s = env.app.world.resource::<SimSettings>();
+    s.dt * f64::from(s.decimation)
+}
+
+/// Writes the base, arm and gripper parts: a world-frame base velocity (m/s, rad/s) for a base
+/// heading `yaw`, an end-effector position target in the base frame (orientation held) and the
+/// gripper.
 fn write_action(
     env: &Env,
     rt: &RobotRuntime,
+    yaw: f64,
     base_world: (Vector2<f64>, f64),
     ee_base: Vector3<f64>,
     closed: bool,
     action: &mut [f32],
 ) -> Result<(), String> {
-    let ctx = env.app.world.resource::<RigidContext>();
-    let obs = rt.observe(ctx).map_err(|e| e.to_string())?;
-    let s = env.app.world.resource::<SimSettings>();
-    let dt = s.dt * f64::from(s.decimation);
+    let dt = step_dt(env);
     let m = rt.fixed.modes;
     let mut k = 0;
     if matches!(m.base, BaseMode::Velocity | BaseMode::Locomotion) {
-        let (_, _, yaw) = obs.base.rotation.euler_angles();
         let v = nalgebra::Rotation2::new(-yaw) * base_world.0;
         // The base command limits: 0.5 m/s, 0.5 m/s, 1.0 rad/s (SPEC.md).
         for x in [v.x / 0.5, v.y / 0.5, base_world.1] {
@@ -239,9 +252,7 @@ impl Policy for PlaceExpert {
         let rt = robot_of(env, &self.robot)?;
         let end = point(env, "rod_end")?;
         let table = point(env, "table")?;
-        let ctx = env.app.world.resource::<RigidContext>();
-        let obs = rt.observe(ctx).map_err(|e| e.to_string())?;
-        let (_, _, yaw) = obs.base.rotation.euler_angles();
+        let (_, yaw) = observe(env, rt)?;
         let err = Vector2::new(table.x - end.x, table.y - end.y);
         let mut v = 1.5 * err;
         if v.norm() > 0.5 {
@@ -251,8 +262,7 @@ impl Policy for PlaceExpert {
         // follows the end's height error at up to 0.25 m/s (an integrator on the target,
         // rate-limited so it cannot wind up ahead of the arm in the absolute mode), within
         // -0.4 .. +0.7 m of the start.
-        let s = env.app.world.resource::<SimSettings>();
-        let dt = s.dt * f64::from(s.decimation);
+        let dt = step_dt(env);
         let cur = rt.ee_target.translation.vector;
         if env
             .app
@@ -273,7 +283,7 @@ impl Policy for PlaceExpert {
         );
         // The rod is attached to the hand; the fingers stay open around it (closing them would
         // squeeze the 7 cm rod).
-        write_action(env, rt, (v, -2.0 * yaw), ee, false, action)
+        write_action(env, rt, yaw, (v, -2.0 * yaw), ee, false, action)
     }
 }
 
@@ -287,14 +297,12 @@ struct CurtainExpert {
 impl Policy for CurtainExpert {
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
         let rt = robot_of(env, &self.robot)?;
-        let ctx = env.app.world.resource::<RigidContext>();
-        let obs = rt.observe(ctx).map_err(|e| e.to_string())?;
-        let (_, _, yaw) = obs.base.rotation.euler_angles();
+        let (obs, yaw) = observe(env, rt)?;
         let b = obs.base.translation.vector;
         let aligned = b.y.abs() < 0.06 && yaw.abs() < 0.06;
         let vx = if aligned || b.x > 1.0 { 0.4 } else { 0.2 };
         let v = Vector2::new(vx, -2.0 * b.y);
         let hold = rt.ee_target.translation.vector;
-        write_action(env, rt, (v, -2.0 * yaw), hold, false, action)
+        write_action(env, rt, yaw, (v, -2.0 * yaw), hold, false, action)
     }
 }

@@ -23,7 +23,7 @@ use modesuite_engine::rigid::RigidRef;
 use modesuite_engine::rng::EnvRng;
 use modesuite_engine::scene::{NamedFrames, SceneError};
 use modesuite_engine::state::{StateHasher, Stateful};
-use modesuite_engine::terms::{world_view, ViewQuery};
+use modesuite_engine::terms::{check_finite, world_view, ViewQuery};
 use modesuite_engine::{
     EngineSystems, EnvSystems, RigidContext, SimApp, SimClock, SimErrors, SimSettings, Space,
     Spaces,
@@ -774,15 +774,11 @@ fn resolve_points(
 /// Evaluates one term into a fresh buffer, checking its values.
 fn eval(t: &NamedTerm, ctx: &TaskCtx, dims: &Dims, what: &str) -> Result<Vec<f64>, String> {
     let mut out = vec![0.0; t.term.dim(dims)];
+    let what = format!("task {what}");
     t.term
         .evaluate(ctx, &mut out)
-        .map_err(|e| format!("task {what} \"{}\": {e}", t.name))?;
-    if let Some((i, v)) = out.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(format!(
-            "task {what} \"{}\": value [{i}] = {v} is not finite",
-            t.name
-        ));
-    }
+        .map_err(|e| format!("{what} term \"{}\": {e}", t.name))?;
+    check_finite(&what, &t.name, &out)?;
     Ok(out)
 }
 
@@ -876,11 +872,7 @@ fn task_evaluate(
         for r in &m.rewards {
             let v = eval(&r.term, ctx, &dims, "reward")?[0];
             let w = r.weight * if r.dt_scaled { step_dt } else { 1.0 };
-            signals.reward += w * v;
-            *signals
-                .values
-                .entry(format!("reward/{}", r.term.name))
-                .or_default() += w * v;
+            signals.add_reward(&r.term.name, w * v);
         }
         let mut ok = !m.success.is_empty();
         for s in &m.success {
@@ -899,10 +891,7 @@ fn task_evaluate(
             signals.success = Some(ok);
             if ok {
                 signals.terminated = true;
-                signals.reward += m.success_bonus;
-                signals
-                    .values
-                    .insert("reward/success_bonus".into(), m.success_bonus);
+                signals.add_reward("success_bonus", m.success_bonus);
             }
         }
         Ok(())

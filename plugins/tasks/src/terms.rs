@@ -372,9 +372,7 @@ pub fn roll_pitch(q: &UnitQuaternion<f64>) -> (f64, f64) {
 /// Registers the term library.
 pub fn register_library(app: &mut SimApp) {
     use TermKind::*;
-    let reg = |app: &mut SimApp, name: &str, kind: TermKind, d: &str, f| {
-        register_task_term(app, name, kind, d, f)
-    };
+    let reg = register_task_term;
     reg(
         app,
         "distance",
