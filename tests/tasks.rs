@@ -515,3 +515,28 @@ fn friction_randomisation_stays_in_range_and_follows_the_seed() {
     ));
     assert!(e.contains(r#"events["f"].range"#), "{e}");
 }
+
+#[test]
+fn spot_start_randomisation_moves_the_floating_base_within_range() {
+    let mut env = make("MoDe-Spot-Curtain-v0", None);
+    let mut starts = Vec::new();
+    for seed in 0..6u64 {
+        env.reset(Some(seed));
+        let b = base(&env);
+        let (_, _, yaw) = b.rotation.euler_angles();
+        assert!(b.translation.x.abs() <= 0.1 + 1e-6 && b.translation.y.abs() <= 0.1 + 1e-6);
+        assert!(yaw.abs() <= 0.1 + 1e-6);
+        starts.push((b.translation.x, b.translation.y, yaw));
+    }
+    println!("Spot starts (x, y, yaw): {starts:?}");
+    env.reset(Some(3));
+    let b = base(&env);
+    assert_eq!(
+        (b.translation.x, b.translation.y),
+        (starts[3].0, starts[3].1)
+    );
+    assert!(
+        starts.windows(2).all(|w| w[0] != w[1]),
+        "every seed its own start"
+    );
+}
