@@ -119,6 +119,10 @@ pub struct RunArgs {
     /// Size of the default orbit camera, WIDTHxHEIGHT.
     #[arg(long, default_value = "480x320")]
     pub video_size: String,
+    /// Draw contact (red) and grasp (yellow) markers and a line of text (episode, step,
+    /// reward, return, success) into the recorded frames.
+    #[arg(long)]
+    pub overlays: bool,
     /// Who acts: `zero` (all-zero action), `random` (uniform over the action space, seeded by
     /// the episode seed) or `scripted` (the task's expert).
     #[arg(long, default_value = "zero")]
@@ -292,6 +296,7 @@ fn run_default(out: &mut dyn Write) -> Result<(), CliError> {
         frames: None,
         camera: None,
         video_size: "480x320".into(),
+        overlays: false,
         policy: "scripted".into(),
         actions: None,
     };
@@ -610,6 +615,7 @@ struct Recorder {
     every: u64,
     fps: f64,
     written: u64,
+    overlays: bool,
 }
 
 impl Recorder {
@@ -646,15 +652,17 @@ impl Recorder {
             every,
             fps: 1.0 / (every as f64 * step_dt),
             written: 0,
+            overlays: args.overlays,
         }))
     }
 
-    /// Renders and writes the current frame when `step` is on the recording stride.
-    fn capture(&mut self, world: &World, step: u64) -> Result<(), CliError> {
+    /// Renders and writes the current frame when `step` is on the recording stride; with
+    /// `--overlays` also the markers and the `status` text.
+    fn capture(&mut self, world: &World, step: u64, status: &str) -> Result<(), CliError> {
         if !step.is_multiple_of(self.every) {
             return Ok(());
         }
-        let cam = match (&self.camera, &self.camera_name) {
+        let mut cam = match (&self.camera, &self.camera_name) {
             (Some(c), _) => c.clone(),
             (None, Some(name)) => self
                 .renderer
@@ -673,13 +681,20 @@ impl Recorder {
                 c
             }
         };
+        cam.overlays = self.overlays;
         let frames = self
             .renderer
             .render_cameras(world, std::slice::from_ref(&cam))
             .map_err(render_err)?;
-        let Some(frame) = frames.first() else {
+        let Some(mut frame) = frames.into_iter().next() else {
             return Ok(());
         };
+        if self.overlays {
+            let (w, h) = (frame.width, frame.height);
+            let lines = [status.to_string()];
+            modesuite_render::hud::draw_text(&mut frame.rgb, w, h, 3, (4, 4), 1, &lines, [255; 3]);
+        }
+        let frame = &frame;
         if let Some(dir) = &self.frames_dir {
             let path = dir.join(format!("frame_{:05}.png", self.written));
             write_frame_png(&path, frame).map_err(render_err)?;
@@ -851,7 +866,11 @@ fn run_scene(
         env.reset(Some(seed));
         policy.reset(seed);
         if let Some(r) = recorder.as_mut() {
-            r.capture(&env.app.world, 0)?;
+            r.capture(
+                &env.app.world,
+                0,
+                &format!("episode {ep}  seed {seed}  step 0"),
+            )?;
         }
         let t = Instant::now();
         let mut ret = 0.0;
@@ -867,7 +886,12 @@ fn run_scene(
             ret += o.reward;
             length = i + 1;
             if let Some(r) = recorder.as_mut() {
-                r.capture(&env.app.world, length)?;
+                let status = format!(
+                    "episode {ep}  step {length}  reward {:.3}  return {ret:.3}  success {}",
+                    o.reward,
+                    o.info.success.map_or("-".to_string(), |s| s.to_string())
+                );
+                r.capture(&env.app.world, length, &status)?;
             }
             progress.update(ep * steps + i + 1);
             if o.terminated || o.truncated {

@@ -423,3 +423,135 @@ fn frame_bytes_are_consistent() {
     assert!(max_err < 1e-3);
     let _ = CameraDesc::looking_at("x", 1, 1, 60.0, [0.0; 3], [1.0, 0.0, 0.0]);
 }
+
+/// Pixels where `on` differs from `off` and has the hue of `rgb` (each channel relative to the
+/// brightest within 0.35 of the marker colour's: shading and sRGB encoding shift it a little).
+fn marker_pixels(on: &CameraFrame, off: &CameraFrame, rgb: [f32; 3]) -> usize {
+    let share = |p: [f32; 3]| {
+        let s = p.iter().copied().fold(1e-3, f32::max);
+        p.map(|c| c / s)
+    };
+    let want = share(rgb);
+    let changed: Vec<_> = on
+        .rgb
+        .chunks(3)
+        .zip(off.rgb.chunks(3))
+        .filter(|(a, b)| a != b)
+        .map(|(a, _)| [a[0], a[1], a[2]].map(f32::from))
+        .collect();
+    println!(
+        "{} pixels changed, e.g. {:?}",
+        changed.len(),
+        &changed[..changed.len().min(4)]
+    );
+    changed
+        .iter()
+        .filter(|p| {
+            share(**p)
+                .iter()
+                .zip(want)
+                .all(|(a, b)| (a - b).abs() < 0.35)
+        })
+        .count()
+}
+
+/// Markers of a deformable object by name.
+fn deformable_markers(
+    env: &mut Env,
+    name: &str,
+) -> modesuite::engine::deformable::DeformableMarkers {
+    let mut q = env
+        .app
+        .world
+        .query::<(&Object, &modesuite::engine::deformable::DeformableMarkers)>();
+    q.iter(&env.app.world)
+        .find(|(o, _)| o.name == name)
+        .map(|(_, m)| m.clone())
+        .unwrap()
+}
+
+#[test]
+fn contact_markers_sit_where_bodies_touch() {
+    use modesuite::render::geometry::CONTACT_MARKER_RGB;
+    let objects = r#"(name: "ground", shape: Plane(size: (10.0, 10.0)), body: Static),
+        (name: "box", shape: Box(size: (0.2, 0.2, 0.2)), pose: (pos: (0.0, 0.0, 0.15)), body: Dynamic())"#;
+    let cams = r#"(name: "on", width: 96, height: 64, overlays: true, pose: (pos: (0.6, -0.6, 0.5)), look_at: (0.0, 0.0, 0.05)),
+                  (name: "off", width: 96, height: 64, pose: (pos: (0.6, -0.6, 0.5)), look_at: (0.0, 0.0, 0.05))"#;
+    let (mut env, mut r) = setup(objects, cams);
+    let mut points = Vec::new();
+    env.app
+        .world
+        .resource::<RigidContext>()
+        .contact_points(2e-3, &mut points);
+    assert!(
+        points.is_empty(),
+        "no contact while the box falls: {points:?}"
+    );
+    for _ in 0..60 {
+        env.step(&[]);
+    }
+    env.app
+        .world
+        .resource::<RigidContext>()
+        .contact_points(2e-3, &mut points);
+    println!("resting box: {} contact points {points:?}", points.len());
+    assert!(points.len() >= 4, "a resting box touches at its corners");
+    for p in &points {
+        // On the ground (within 2 mm) and under the box's 0.2 m footprint.
+        assert!(p.z.abs() < 2e-3, "contact height {}", p.z);
+        assert!(p.x.abs() < 0.101 && p.y.abs() < 0.101, "contact {p}");
+    }
+    let (on, off) = (render(&mut r, &env, "on"), render(&mut r, &env, "off"));
+    let red = marker_pixels(&on, &off, CONTACT_MARKER_RGB);
+    println!("contact marker pixels: {red}");
+    assert!(red > 4, "contact markers drawn");
+    assert_eq!(on.depth, off.depth, "markers do not write depth");
+}
+
+#[test]
+fn deformables_publish_contact_nodes_and_grasp_markers_follow_the_gripper() {
+    use modesuite::render::geometry::GRASP_MARKER_RGB;
+    // Cloth and FEM rod fall onto the table: their touching nodes are published.
+    let mut env = common::run_scene("scenes/examples/tabletop_cameras.scene.ron", 60);
+    for name in ["towel", "rod"] {
+        let m = deformable_markers(&mut env, name);
+        let nodes = common::nodes(&mut env, name);
+        let zmin = nodes.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+        println!(
+            "{name}: {} of {} nodes touch, {} grasped; lowest node z {zmin:.4}",
+            m.contacts.len(),
+            nodes.len(),
+            m.grasped.len()
+        );
+        assert!(!m.contacts.is_empty(), "{name} rests on the table");
+        assert!(m.grasped.is_empty(), "nothing holds the {name}");
+        // Touching nodes are the low ones (within 2 cm of the lowest).
+        for &i in &m.contacts {
+            assert!(nodes[i as usize].z < zmin + 0.02, "{name} node {i}");
+        }
+    }
+    // The Franka closes its gripper on the napkin at 3.5 s and lifts it.
+    let mut env = common::run_scene("scenes/examples/franka_cloth_grasp.scene.ron", 300);
+    let m = deformable_markers(&mut env, "napkin");
+    let nodes = common::nodes(&mut env, "napkin");
+    let held: Vec<_> = m.grasped.iter().map(|&i| nodes[i as usize]).collect();
+    println!("napkin: {} grasped particles at {held:?}", held.len());
+    assert!(!held.is_empty(), "the closed gripper holds particles");
+    assert!(
+        held.iter().all(|p| p.z > 0.55),
+        "the held particles are lifted with the hand"
+    );
+    device();
+    let model = env.app.scene().cloned().unwrap();
+    let mut r = EnvRenderer::for_scene(model).unwrap_or_else(|e| panic!("{e}"));
+    let mut on = r.orbit_camera(&env.app.world, "o", 320, 240, Default::default());
+    on.markers = false;
+    on.overlays = true;
+    let mut off = on.clone();
+    off.name = "o_off".into();
+    off.overlays = false;
+    let frames = r.render_cameras(&env.app.world, &[on, off]).unwrap();
+    let yellow = marker_pixels(&frames[0], &frames[1], GRASP_MARKER_RGB);
+    println!("grasp marker pixels: {yellow}");
+    assert!(yellow >= 6, "grasp markers drawn");
+}

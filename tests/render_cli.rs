@@ -75,6 +75,42 @@ fn run_with_video_writes_a_decodable_gif_and_png_frames() {
 }
 
 #[test]
+fn run_with_overlays_draws_the_status_text_into_frames() {
+    let dir = tmp_dir("overlays");
+    let white = |png: &std::path::Path| {
+        let (w, _, img) = read_png(png).unwrap_or_else(|e| panic!("{e}"));
+        // The text box: 4 px from the top-left corner, one 7 px line.
+        (4..15)
+            .flat_map(|y| (4..w as usize).map(move |x| 3 * (y * w as usize + x)))
+            .filter(|&i| img[i..i + 3] == [255, 255, 255])
+            .count()
+    };
+    let mut counts = Vec::new();
+    for overlays in [false, true] {
+        let frames = dir.join(format!("frames_{overlays}"));
+        let mut cmd = modesuite();
+        cmd.args([
+            "run",
+            "scenes/examples/drop.scene.ron",
+            "--steps",
+            "4",
+            "--video-size",
+            "240x160",
+            "--frames",
+        ])
+        .arg(&frames);
+        if overlays {
+            cmd.arg("--overlays");
+        }
+        ok(&cmd.output().unwrap());
+        counts.push(white(&frames.join("frame_00002.png")));
+    }
+    println!("white text pixels without / with --overlays: {counts:?}");
+    assert_eq!(counts[0], 0, "no text without --overlays");
+    assert!(counts[1] > 100, "the status line is drawn");
+}
+
+#[test]
 fn run_with_a_scene_camera_and_mp4_when_ffmpeg_exists() {
     let dir = tmp_dir("mp4");
     let has_ffmpeg = modesuite::render::video::ffmpeg_available();
@@ -389,6 +425,19 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
         a.len()
     );
     assert!(diff > 1000, "the camera moved");
+    // The heads-up text (white 5 x 7 glyphs on a dark box at the top left) is in the shots.
+    let white = |img: &[u8]| {
+        (6..27)
+            .flat_map(|y| (6..300).map(move |x| 3 * (y * 320 + x)))
+            .filter(|&i| img[i..i + 3] == [255, 255, 255])
+            .count()
+    };
+    println!(
+        "heads-up text: {} and {} white pixels",
+        white(&a),
+        white(&b)
+    );
+    assert!(white(&a) > 100 && white(&b) > 100, "heads-up text drawn");
     let rec = modesuite::render::teleop::Recording::load(&record).unwrap_or_else(|e| panic!("{e}"));
     let names: Vec<_> = rec.episodes[0].actions.iter().map(|a| a.name).collect();
     println!("recorded: seed {} actions {names:?}", rec.episodes[0].seed);

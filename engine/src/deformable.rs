@@ -17,7 +17,7 @@ use crate::app::SimErrors;
 use crate::components::{DeformableNodes, Object};
 use crate::coupling::{ContactQuery, GripperState, Grippers, NoColliders, Reaction};
 use crate::rigid::{DeformableSystems, RigidContext};
-use crate::state::{PluginStates, StateHasher, Stateful};
+use crate::state::{HashState, PluginStates, StateHasher, Stateful};
 use crate::terms::{passive_forces_for, ForceContext, SceneTerms};
 use crate::{SimApp, SimClock, SimSettings};
 
@@ -81,6 +81,15 @@ pub trait DeformableSolver: Send + Sync + 'static {
     fn release_body(&mut self, body: u32) -> Result<(), String> {
         let _ = body;
         Ok(())
+    }
+    /// Appends the nodes held by grasps of any body (any order; repeats allowed). Default: none.
+    fn grasped_nodes(&self, out: &mut Vec<u32>) {
+        let _ = out;
+    }
+    /// Appends the nodes in contact with rigid colliders at the end of the last step (any
+    /// order; repeats allowed). Default: none.
+    fn contact_nodes(&self, out: &mut Vec<u32>) {
+        let _ = out;
     }
 }
 
@@ -169,11 +178,14 @@ impl<S: DeformableSolver> DeformableContext<S> {
             .map(|b| &mut b.solver)
     }
 
-    /// Adds a spawned body and gives its entity a [`DeformableNodes`] component.
+    /// Adds a spawned body and gives its entity [`DeformableNodes`] and [`DeformableMarkers`]
+    /// components.
     pub fn spawn_into(app: &mut SimApp, entity: Entity, solver: S) {
+        let mut markers = DeformableMarkers::default();
+        markers.read(&solver);
         app.world
             .entity_mut(entity)
-            .insert(DeformableNodes(solver.node_positions().to_vec()));
+            .insert((DeformableNodes(solver.node_positions().to_vec()), markers));
         app.world
             .resource_mut::<Self>()
             .bodies
@@ -295,14 +307,52 @@ fn deformable_step<S: DeformableSolver>(
     }
 }
 
+/// Which nodes of a deformable are grasped and which touch rigid colliders (written with its
+/// [`DeformableNodes`] after every physics step): what viewers draw as grasp and contact markers
+/// and what tasks may read. Derived from the solver's state.
+#[derive(Component, Debug, Clone, PartialEq, Default)]
+pub struct DeformableMarkers {
+    /// Nodes held by grasps, ascending.
+    pub grasped: Vec<u32>,
+    /// Nodes in contact with rigid colliders after the last step, ascending.
+    pub contacts: Vec<u32>,
+}
+
+impl DeformableMarkers {
+    fn read<S: DeformableSolver>(&mut self, solver: &S) {
+        self.grasped.clear();
+        self.contacts.clear();
+        solver.grasped_nodes(&mut self.grasped);
+        solver.contact_nodes(&mut self.contacts);
+        for list in [&mut self.grasped, &mut self.contacts] {
+            list.sort_unstable();
+            list.dedup();
+        }
+    }
+}
+
+impl HashState for DeformableMarkers {
+    fn hash_state(&self, h: &mut StateHasher) {
+        for list in [&self.grasped, &self.contacts] {
+            h.write_u64(list.len() as u64);
+            for &i in list {
+                h.write_u64(u64::from(i));
+            }
+        }
+    }
+}
+
 fn deformable_writeback<S: DeformableSolver>(
     ctx: Res<DeformableContext<S>>,
-    mut q: Query<&mut DeformableNodes>,
+    mut q: Query<(&mut DeformableNodes, Option<&mut DeformableMarkers>)>,
 ) {
     for body in &ctx.bodies {
-        if let Ok(mut nodes) = q.get_mut(body.entity) {
+        if let Ok((mut nodes, markers)) = q.get_mut(body.entity) {
             nodes.0.clear();
             nodes.0.extend_from_slice(body.solver.node_positions());
+            if let Some(mut m) = markers {
+                m.read(&body.solver);
+            }
         }
     }
 }
@@ -316,6 +366,7 @@ where
     app.insert_resource(DeformableContext::<S>::default());
     app.register_stateful::<DeformableContext<S>>();
     app.register_stateful_component::<DeformableNodes>();
+    app.register_stateful_component::<DeformableMarkers>();
     app.add_systems(crate::Substep, deformable_step::<S>.in_set(set.clone()));
     app.add_systems(crate::PhysicsStep, deformable_writeback::<S>.in_set(set));
 }

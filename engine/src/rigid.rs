@@ -243,6 +243,36 @@ impl RigidContext {
         self.bodies.get(h).map(|b| pose_from_rapier(b.position()))
     }
 
+    /// Appends the world positions (m) of the rigid contact points whose separation was at most
+    /// `max_distance` m (negative: penetration) after the last rapier step: the midpoint of the
+    /// two surface points of every tracked point of every contact manifold, in the narrow
+    /// phase's pair order.
+    pub fn contact_points(&self, max_distance: f64, out: &mut Vec<Vector3<f64>>) {
+        for pair in self.narrow_phase.contact_pairs() {
+            let (Some(c1), Some(c2)) = (
+                self.colliders.get(pair.collider1),
+                self.colliders.get(pair.collider2),
+            ) else {
+                continue;
+            };
+            let (p1, p2) = (
+                pose_from_rapier(c1.position()),
+                pose_from_rapier(c2.position()),
+            );
+            for m in pair.manifolds() {
+                for c in m
+                    .points
+                    .iter()
+                    .filter(|c| f64::from(c.dist) <= max_distance)
+                {
+                    let a = p1 * nalgebra::Point3::from(vec_from_rapier(c.local_p1));
+                    let b = p2 * nalgebra::Point3::from(vec_from_rapier(c.local_p2));
+                    out.push((a.coords + b.coords) * 0.5);
+                }
+            }
+        }
+    }
+
     /// Queues an impulse a deformable applied to a body; it is applied as a force in the next
     /// rapier step.
     pub fn push_reaction(&mut self, r: Reaction) {

@@ -137,6 +137,12 @@ impl DeformableSolver for FemSolid {
         }
         Ok(())
     }
+    fn grasped_nodes(&self, out: &mut Vec<u32>) {
+        FemSolid::grasped_nodes(self, out);
+    }
+    fn contact_nodes(&self, out: &mut Vec<u32>) {
+        FemSolid::contact_nodes(self, out);
+    }
 }
 
 /// Adds the `fem.solid` body kind and the solid systems.

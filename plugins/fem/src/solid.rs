@@ -800,6 +800,22 @@ impl FemSolid {
             .collect()
     }
 
+    /// Appends the nodes held by grasps (grasp order).
+    pub fn grasped_nodes(&self, out: &mut Vec<u32>) {
+        out.extend(self.grasps.iter().flat_map(|g| g.nodes.iter().copied()));
+    }
+
+    /// Appends the nodes whose contact constraint was active at the end of the last step
+    /// (ascending).
+    pub fn contact_nodes(&self, out: &mut Vec<u32>) {
+        out.extend(
+            self.active
+                .iter()
+                .filter(|c| matches!(c.kind, ConKind::Contact))
+                .map(|c| c.node),
+        );
+    }
+
     /// State of a grasp after the last step.
     pub fn grasp_info(&self, id: u32) -> Result<GraspInfo, FemError> {
         let g = self

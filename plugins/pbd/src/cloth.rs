@@ -936,6 +936,28 @@ impl Cloth {
             .collect()
     }
 
+    /// Appends the particles held by grasps (force-limited attachments on body frames).
+    pub fn grasped_particles(&self, out: &mut Vec<u32>) {
+        out.extend(
+            self.attachments
+                .iter()
+                .filter(|a| a.frame.is_some() && !a.kinematic)
+                .flat_map(|a| a.particles.iter().copied()),
+        );
+    }
+
+    /// Appends the particles that a rigid contact pushed in the last substep of the last step
+    /// (particle order).
+    pub fn contact_particles(&self, out: &mut Vec<u32>) {
+        out.extend(
+            self.c_particle
+                .iter()
+                .zip(&self.c_dn)
+                .filter(|(_, dn)| **dn > 0.0)
+                .map(|(p, _)| *p),
+        );
+    }
+
     /// Ids of all attachments, in creation order.
     pub fn attachment_ids(&self) -> Vec<AttachmentId> {
         self.attachments

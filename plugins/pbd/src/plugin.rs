@@ -201,6 +201,12 @@ impl DeformableSolver for Cloth {
         }
         Ok(())
     }
+    fn grasped_nodes(&self, out: &mut Vec<u32>) {
+        self.grasped_particles(out);
+    }
+    fn contact_nodes(&self, out: &mut Vec<u32>) {
+        self.contact_particles(out);
+    }
 }
 
 /// Adds the `pbd.cloth` body kind and the cloth systems.

@@ -1,7 +1,9 @@
-// modesuite-render viewer: draws an offscreen colour image over the whole window.
+// modesuite-render viewer: draws an offscreen colour image over the whole window, with the
+// heads-up text image (RGBA, alpha = coverage) composited 1:1 at the top-left corner.
 
 @group(0) @binding(0) var blit_src: texture_2d<f32>;
 @group(0) @binding(1) var blit_sampler: sampler;
+@group(0) @binding(2) var blit_hud: texture_2d<f32>;
 
 struct BlitOut {
     @builtin(position) clip: vec4<f32>,
@@ -20,5 +22,12 @@ fn vs_blit(@builtin(vertex_index) i: u32) -> BlitOut {
 
 @fragment
 fn fs_blit(in: BlitOut) -> @location(0) vec4<f32> {
-    return textureSampleLevel(blit_src, blit_sampler, in.uv, 0.0);
+    var c = textureSampleLevel(blit_src, blit_sampler, in.uv, 0.0);
+    let px = vec2<u32>(in.clip.xy);
+    let hud_size = textureDimensions(blit_hud);
+    if (px.x < hud_size.x && px.y < hud_size.y) {
+        let h = textureLoad(blit_hud, px, 0);
+        c = vec4<f32>(mix(c.rgb, h.rgb, h.a), 1.0);
+    }
+    return c;
 }

@@ -168,6 +168,9 @@ pub struct CameraDesc {
     /// Draw the translucent target markers (default off for sensors).
     #[serde(default)]
     pub markers: bool,
+    /// Draw contact (red) and grasp (yellow) markers (default off).
+    #[serde(default)]
+    pub overlays: bool,
 }
 
 impl CameraDesc {
@@ -194,6 +197,7 @@ impl CameraDesc {
             near: default_near(),
             far: default_far(),
             markers: false,
+            overlays: false,
         }
     }
 

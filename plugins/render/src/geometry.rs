@@ -16,6 +16,7 @@ use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
 use modesuite_engine::components::{DeformableNodes, Object};
+use modesuite_engine::deformable::DeformableMarkers;
 use modesuite_engine::math::pose_from_rapier;
 use modesuite_engine::scene::{BodyModel, NamedFrames, RigidShape, SceneModel};
 use modesuite_engine::shapes::ShapeDesc;
@@ -42,15 +43,19 @@ pub struct Vertex {
     pub flags: u32,
 }
 
-/// The triangles of one frame, world frame: opaque geometry first, then translucent markers.
+/// The triangles of one frame, world frame: opaque geometry first, then translucent target
+/// markers, then the contact and grasp markers.
 #[derive(Debug, Clone, Default)]
 pub struct FrameGeometry {
     /// All vertices.
     pub vertices: Vec<Vertex>,
-    /// Triangle indices; `0..opaque_indices` are opaque, the rest are markers.
+    /// Triangle indices; `0..opaque_indices` are opaque, `opaque_indices..target_indices` target
+    /// markers, the rest contact and grasp markers.
     pub indices: Vec<u32>,
     /// Number of opaque indices.
     pub opaque_indices: u32,
+    /// End of the target markers' indices.
+    pub target_indices: u32,
     /// Bounds of the finite geometry (everything but ground planes), for shadows and framing.
     pub focus: Option<(Vector3<f64>, Vector3<f64>)>,
 }
@@ -60,6 +65,7 @@ impl FrameGeometry {
         self.vertices.clear();
         self.indices.clear();
         self.opaque_indices = 0;
+        self.target_indices = 0;
         self.focus = None;
     }
 
@@ -352,13 +358,34 @@ pub fn deformable_triangles(body: &BodyModel) -> Option<Vec<[u32; 3]>> {
     None
 }
 
+/// Which markers [`SceneExtractor::extract`] adds after the opaque geometry.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Markers {
+    /// Translucent spheres at the scene's named frames (task targets).
+    pub targets: bool,
+    /// Contact markers (red: rigid contact points and deformable nodes touching colliders) and
+    /// grasp markers (yellow: deformable nodes held by grippers).
+    pub overlays: bool,
+}
+
+/// Colour of contact markers.
+pub const CONTACT_MARKER_RGB: [f32; 3] = [0.95, 0.1, 0.1];
+/// Colour of grasp markers.
+pub const GRASP_MARKER_RGB: [f32; 3] = [1.0, 0.85, 0.0];
+/// Radius of contact and grasp markers, m.
+pub const OVERLAY_MARKER_RADIUS: f64 = 0.012;
+/// Rigid contact points at most this far apart (m) count as touching for the markers.
+const CONTACT_MARKER_DISTANCE: f64 = 2e-3;
+
 /// Extracts the drawable geometry of one env's world; caches tessellations.
 pub struct SceneExtractor {
     model: Arc<SceneModel>,
     colliders: HashMap<ColliderHandle, Option<ColliderVisual>>,
     deformables: Option<Vec<DeformableVisual>>,
     marker: LocalMesh,
+    dot: LocalMesh,
     marker_radius: f64,
+    points: Vec<Vector3<f64>>,
     normals: Vec<Vector3<f64>>,
     positions: Vec<Vector3<f64>>,
 }
@@ -371,7 +398,13 @@ impl SceneExtractor {
             colliders: HashMap::new(),
             deformables: None,
             marker: LocalMesh::sphere(marker_radius),
+            dot: {
+                let (v, t) =
+                    rapier3d::geometry::Ball::new(OVERLAY_MARKER_RADIUS as f32).to_trimesh(8, 4);
+                LocalMesh::from_parry(&v, &t, 60.0)
+            },
             marker_radius,
+            points: Vec::new(),
             normals: Vec::new(),
             positions: Vec::new(),
         }
@@ -466,8 +499,8 @@ impl SceneExtractor {
         out
     }
 
-    /// Fills `out` with the world's current geometry; markers at the named frames when asked.
-    pub fn extract(&mut self, world: &World, markers: bool, out: &mut FrameGeometry) {
+    /// Fills `out` with the world's current geometry and the markers asked for.
+    pub fn extract(&mut self, world: &World, markers: Markers, out: &mut FrameGeometry) {
         out.clear();
         if let Some(rigid) = world.get_resource::<RigidContext>() {
             let handles: Vec<ColliderHandle> = rigid.colliders.iter().map(|(h, _)| h).collect();
@@ -525,14 +558,15 @@ impl SceneExtractor {
         self.positions = positions;
         self.normals = normals;
         out.opaque_indices = out.indices.len() as u32;
-        if markers {
+        // Markers do not cast shadows or change the framing.
+        let focus = out.focus;
+        if markers.targets {
             if let Some(frames) = world.get_resource::<NamedFrames>() {
                 let style = Style {
                     color: rgba([0.1, 0.9, 0.3], 0.35),
                     id: 0,
                     flags: 0,
                 };
-                let focus = out.focus;
                 for pose in frames.0.values() {
                     let at = Isometry3::from_parts(
                         pose.translation,
@@ -540,10 +574,52 @@ impl SceneExtractor {
                     );
                     out.push_mesh(&self.marker, &at, style);
                 }
-                // Markers do not cast shadows or change the framing.
-                out.focus = focus;
             }
         }
+        out.target_indices = out.indices.len() as u32;
+        if markers.overlays {
+            self.push_overlays(world, out);
+        }
+        out.focus = focus;
+    }
+
+    /// Contact and grasp markers: small spheres at rigid contact points and at the deformable
+    /// nodes that touch colliders or are grasped (grasp colour wins).
+    fn push_overlays(&mut self, world: &World, out: &mut FrameGeometry) {
+        let style = |rgb: [f32; 3]| Style {
+            color: rgba(rgb, 0.9),
+            id: 0,
+            flags: 0,
+        };
+        let mut points = std::mem::take(&mut self.points);
+        points.clear();
+        if let Some(rigid) = world.get_resource::<RigidContext>() {
+            rigid.contact_points(CONTACT_MARKER_DISTANCE, &mut points);
+        }
+        let mut grasped = Vec::new();
+        for d in self.deformables.iter().flatten() {
+            let (Some(nodes), Some(m)) = (
+                world.get::<DeformableNodes>(d.entity),
+                world.get::<DeformableMarkers>(d.entity),
+            ) else {
+                continue;
+            };
+            let at = |i: &u32| nodes.0.get(*i as usize).copied();
+            points.extend(
+                m.contacts
+                    .iter()
+                    .filter(|i| m.grasped.binary_search(i).is_err())
+                    .filter_map(at),
+            );
+            grasped.extend(m.grasped.iter().filter_map(at));
+        }
+        for (list, rgb) in [(&points, CONTACT_MARKER_RGB), (&grasped, GRASP_MARKER_RGB)] {
+            for p in list.iter().filter(|p| p.iter().all(|x| x.is_finite())) {
+                let at = Isometry3::translation(p.x, p.y, p.z);
+                out.push_mesh(&self.dot, &at, style(rgb));
+            }
+        }
+        self.points = points;
     }
 
     /// Radius of the target markers, m.

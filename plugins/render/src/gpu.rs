@@ -53,6 +53,7 @@ pub(crate) struct Pipelines {
     pub(crate) shadow_layout: wgpu::BindGroupLayout,
     pub(crate) opaque: wgpu::RenderPipeline,
     pub(crate) markers: wgpu::RenderPipeline,
+    pub(crate) overlays: wgpu::RenderPipeline,
     pub(crate) shadow: wgpu::RenderPipeline,
     pub(crate) compare_sampler: wgpu::Sampler,
 }
@@ -271,26 +272,34 @@ impl Pipelines {
             cache: None,
         });
         // Translucent markers: colour only, tested against but not written to the z-buffer.
-        let markers = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("markers"),
-            layout: Some(&main_layout),
-            vertex: vertex("vs_main"),
-            primitive,
-            depth_stencil: Some(depth(false, Default::default())),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_marker"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: COLOR_FORMAT,
-                    blend: Some(wgpu::BlendState::ALPHA_BLENDING),
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        // Contact and grasp markers: flat colour drawn over everything (they are often inside
+        // or under the bodies that touch).
+        let marker_pipeline = |label: &'static str, entry: &'static str, compare| {
+            let mut depth_stencil = depth(false, Default::default());
+            depth_stencil.depth_compare = Some(compare);
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&main_layout),
+                vertex: vertex("vs_main"),
+                primitive,
+                depth_stencil: Some(depth_stencil),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: COLOR_FORMAT,
+                        blend: Some(wgpu::BlendState::ALPHA_BLENDING),
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let markers = marker_pipeline("markers", "fs_marker", wgpu::CompareFunction::LessEqual);
+        let overlays = marker_pipeline("overlays", "fs_overlay", wgpu::CompareFunction::Always);
         let shadow = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("shadow"),
             layout: Some(&shadow_pl),
@@ -321,6 +330,7 @@ impl Pipelines {
             shadow_layout,
             opaque,
             markers,
+            overlays,
             shadow,
             compare_sampler,
         }
@@ -395,6 +405,8 @@ pub struct ViewSetup {
     pub far: f64,
     /// Draw target markers.
     pub markers: bool,
+    /// Draw contact and grasp markers.
+    pub overlays: bool,
 }
 
 /// A rendered camera image, flat and row-major (row 0 at the top).
@@ -764,7 +776,8 @@ impl Targets {
             ],
         };
         let opaque = 0..geom.opaque_indices;
-        let marker_range = geom.opaque_indices..geom.indices.len() as u32;
+        let target_range = geom.opaque_indices..geom.target_indices;
+        let overlay_range = geom.target_indices..geom.indices.len() as u32;
         if shadows {
             q.write_buffer(&self.shadow.uniform, 0, bytemuck::bytes_of(&uniform));
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -846,7 +859,11 @@ impl Targets {
                     pass.draw_indexed(opaque.clone(), 0, 0..1);
                 }
             }
-            if view.markers && !marker_range.is_empty() {
+            let ranges = [
+                (view.markers, &target_range),
+                (view.overlays, &overlay_range),
+            ];
+            if ranges.iter().any(|(on, r)| *on && !r.is_empty()) {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("markers"),
                     color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -868,11 +885,16 @@ impl Targets {
                     }),
                     ..Default::default()
                 });
-                pass.set_pipeline(&dev.pipelines.markers);
                 pass.set_bind_group(0, &t.bind.1, &[]);
                 pass.set_vertex_buffer(0, vb.slice(..));
                 pass.set_index_buffer(ib.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(marker_range.clone(), 0, 0..1);
+                let pipelines = [&dev.pipelines.markers, &dev.pipelines.overlays];
+                for ((on, r), pipeline) in ranges.iter().zip(pipelines) {
+                    if *on && !r.is_empty() {
+                        pass.set_pipeline(pipeline);
+                        pass.draw_indexed((*r).clone(), 0, 0..1);
+                    }
+                }
             }
             if readback {
                 let size = wgpu::Extent3d {

@@ -35,6 +35,7 @@
 pub mod config;
 pub mod geometry;
 pub mod gpu;
+pub mod hud;
 pub mod renderer;
 pub mod teleop;
 pub mod video;

@@ -12,7 +12,7 @@ use modesuite_engine::RigidContext;
 use nalgebra::{Isometry3, Vector3};
 
 use crate::config::{CameraDesc, RenderConfig};
-use crate::geometry::{FrameGeometry, SceneExtractor};
+use crate::geometry::{FrameGeometry, Markers, SceneExtractor};
 use crate::gpu::{CameraFrame, RenderDevice, Targets, ViewSetup};
 use crate::RenderError;
 
@@ -103,7 +103,8 @@ impl EnvRenderer {
     /// The bounding box of the world's current finite geometry (everything but ground planes;
     /// a unit box at the origin when there is none).
     pub fn scene_bounds(&mut self, world: &World) -> (Vector3<f64>, Vector3<f64>) {
-        self.extractor.extract(world, false, &mut self.geometry);
+        self.extractor
+            .extract(world, Markers::default(), &mut self.geometry);
         self.geometry
             .focus
             .unwrap_or((Vector3::repeat(-0.5), Vector3::repeat(0.5)))
@@ -126,6 +127,7 @@ impl EnvRenderer {
             near: cam.near,
             far: cam.far,
             markers: cam.markers,
+            overlays: cam.overlays,
         })
     }
 
@@ -142,7 +144,10 @@ impl EnvRenderer {
             let slot = self.targets.slot(&cam.name, cam.width, cam.height);
             views.push((slot, view));
         }
-        let markers = cams.iter().any(|c| c.markers);
+        let markers = Markers {
+            targets: cams.iter().any(|c| c.markers),
+            overlays: cams.iter().any(|c| c.overlays),
+        };
         self.extractor.extract(world, markers, &mut self.geometry);
         self.targets
             .encode(encoder, &self.geometry, &views, readback);

@@ -117,3 +117,11 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> FragmentOut {
 fn fs_marker(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     return shade(in, front);
 }
+
+// Contact and grasp markers: their own colour (shaded a little by the normal so spheres read
+// as spheres), drawn over everything.
+@fragment
+fn fs_overlay(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    let n = normalize(in.normal);
+    return vec4<f32>(in.color.rgb * (0.75 + 0.25 * max(n.z, 0.0)), in.color.a);
+}

@@ -2,13 +2,16 @@
 //! camera, with pause/step/reset, keyboard teleoperation and episode recording.
 //!
 //! Keys: `space` pause, `n` one step while paused, `r` reset (next seed), arrows / left-drag
-//! orbit, `+`/`-` / wheel zoom, `m` target markers, `c` cycle the scene's cameras and the orbit
-//! camera, `p` screenshot (PNG), `esc` quit. Teleoperation ([`TeleopAction`]): `w a s d` body,
-//! `q e` turn, `i k j l` hand forward/back/left/right, `u o` hand up/down, `g` grasp, `h` release.
-//! The window title shows time, step, reward, return, success, the last action and frame rate.
+//! orbit, `+`/`-` / wheel zoom, `m` target markers, `x` contact (red) and grasp (yellow) markers,
+//! `t` heads-up text, `c` cycle the scene's cameras and the orbit camera, `p` screenshot (PNG, as
+//! the window shows it), `esc` quit. Teleoperation ([`TeleopAction`]): `w a s d` body, `q e`
+//! turn, `i k j l` hand forward/back/left/right, `u o` hand up/down, `g` grasp, `h` release.
+//! The heads-up text (top left) and the window title show time, step, reward, return, success,
+//! the last action and frame rate.
 //!
 //! The scene is rendered by the same [`EnvRenderer`] as the headless cameras (into an offscreen
-//! texture) and drawn to the window with a full-screen triangle.
+//! texture) and drawn to the window with a full-screen triangle, the heads-up text (an RGBA
+//! texture rasterised by [`crate::hud`]) composited in the same pass.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -79,6 +82,8 @@ struct Gpu {
     blit: wgpu::RenderPipeline,
     blit_layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
+    /// The heads-up text image and its size (1 x 1 transparent when the text is off).
+    hud: Option<(wgpu::Texture, u32, u32)>,
 }
 
 struct Viewer {
@@ -90,6 +95,10 @@ struct Viewer {
     /// Scene bounds at start (the orbit's centre and scale stay fixed while things move).
     bounds: Option<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)>,
     markers: bool,
+    /// Contact and grasp markers.
+    overlays: bool,
+    /// The heads-up text (reward, success, step, action).
+    hud: bool,
     /// 0 = orbit camera, i = scene camera i - 1.
     camera: usize,
     paused: bool,
@@ -146,6 +155,8 @@ pub fn run_viewer(mut env: Env, opts: ViewerOptions) -> Result<(ViewerSummary, E
         orbit: Orbit::default(),
         bounds: None,
         markers: true,
+        overlays: true,
+        hud: true,
         camera: 0,
         step_once: false,
         reset: false,
@@ -172,6 +183,85 @@ pub fn run_viewer(mut env: Env, opts: ViewerOptions) -> Result<(ViewerSummary, E
     match viewer.error.take() {
         Some(e) => Err(e),
         None => Ok((viewer.summary, viewer.env)),
+    }
+}
+
+/// Distance of the heads-up text box from the window's top-left corner, px.
+const HUD_MARGIN: u32 = 6;
+
+/// Size of a heads-up text pixel for a window `width` px wide.
+fn hud_scale(width: u32) -> u32 {
+    if width >= 900 {
+        2
+    } else {
+        1
+    }
+}
+
+impl Gpu {
+    /// Rasterises the heads-up text into an RGBA texture the size of its box (plus the
+    /// margin), reusing the last texture when the size is the same; 1 x 1 transparent when
+    /// there is no text.
+    fn upload_hud(&mut self, lines: &[String]) -> &wgpu::Texture {
+        let scale = hud_scale(self.config.width);
+        let (bw, bh) = crate::hud::text_box_size(lines, scale);
+        let (w, h) = if bw == 0 {
+            (1, 1)
+        } else {
+            (bw + HUD_MARGIN, bh + HUD_MARGIN)
+        };
+        let mut pixels = vec![0u8; (w * h * 4) as usize];
+        if bw > 0 {
+            crate::hud::draw_text(
+                &mut pixels,
+                w,
+                h,
+                4,
+                (HUD_MARGIN, HUD_MARGIN),
+                scale,
+                lines,
+                [255; 3],
+            );
+        }
+        let dev = self.renderer.device().clone();
+        if !matches!(&self.hud, Some((_, tw, th)) if (*tw, *th) == (w, h)) {
+            let tex = dev.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("hud"),
+                size: wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8Unorm,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            });
+            self.hud = Some((tex, w, h));
+        }
+        let (tex, _, _) = self.hud.as_ref().expect("set above");
+        dev.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: tex,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            &pixels,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(4 * w),
+                rows_per_image: Some(h),
+            },
+            wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+        );
+        tex
     }
 }
 
@@ -243,6 +333,16 @@ impl Viewer {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let layout = d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -293,6 +393,7 @@ impl Viewer {
             blit,
             blit_layout,
             sampler,
+            hud: None,
         })
     }
 
@@ -302,6 +403,7 @@ impl Viewer {
         if self.camera > 0 && self.camera <= n_scene {
             let mut cam = gpu.renderer.config().cameras[self.camera - 1].clone();
             cam.markers = self.markers;
+            cam.overlays = self.overlays;
             return Some(cam);
         }
         let (lo, hi) = *self
@@ -309,6 +411,7 @@ impl Viewer {
             .get_or_insert_with(|| gpu.renderer.scene_bounds(&self.env.app.world));
         let mut cam = self.orbit.camera("viewer", width, height, &lo, &hi);
         cam.markers = self.markers;
+        cam.overlays = self.overlays;
         Some(cam)
     }
 
@@ -417,6 +520,34 @@ impl Viewer {
         )
     }
 
+    /// The heads-up text: what the title says, on two lines (empty when the text is off).
+    fn hud_lines(&self) -> Vec<String> {
+        if !self.hud {
+            return Vec::new();
+        }
+        let clock = self.env.app.world.resource::<SimClock>();
+        vec![
+            format!(
+                "t {:.2} s  step {}  reward {:.3}  return {:.3}  success {}",
+                clock.time,
+                clock.episode_steps,
+                self.last_reward,
+                self.episode_return,
+                self.success.map_or("-".to_string(), |s| s.to_string()),
+            ),
+            format!(
+                "{}{}  {:.0} fps",
+                if self.paused { "PAUSED  " } else { "" },
+                self.last_action
+                    .map_or("no action".to_string(), |a| format!(
+                        "action: {}",
+                        a.label()
+                    )),
+                self.fps.2,
+            ),
+        ]
+    }
+
     fn redraw(&mut self) -> Result<(), RenderError> {
         self.advance();
         let Some((w, h)) = self.gpu.as_ref().map(|g| (g.config.width, g.config.height)) else {
@@ -426,6 +557,7 @@ impl Viewer {
             return Ok(());
         };
         let title = self.title();
+        let hud = self.hud_lines();
         let shot = std::mem::take(&mut self.screenshot);
         let Some(gpu) = self.gpu.as_mut() else {
             return Ok(());
@@ -434,12 +566,23 @@ impl Viewer {
             let frames = gpu
                 .renderer
                 .render_cameras(&self.env.app.world, std::slice::from_ref(&cam))?;
-            if let Some(f) = frames.first() {
+            if let Some(mut f) = frames.into_iter().next() {
+                // The screenshot shows what the window shows, heads-up text included.
+                crate::hud::draw_text(
+                    &mut f.rgb,
+                    f.width,
+                    f.height,
+                    3,
+                    (HUD_MARGIN, HUD_MARGIN),
+                    hud_scale(f.width),
+                    &hud,
+                    [255; 3],
+                );
                 let path = self.opts.screenshot_dir.join(format!(
                     "modesuite-view-{:04}.png",
                     self.summary.screenshots.len()
                 ));
-                crate::video::write_frame_png(&path, f)?;
+                crate::video::write_frame_png(&path, &f)?;
                 self.summary.screenshots.push(path);
             }
         }
@@ -456,6 +599,7 @@ impl Viewer {
         let dev = gpu.renderer.device().clone();
         let src = gpu.renderer.render_to_texture(&self.env.app.world, &cam)?;
         let src_view = src.create_view(&Default::default());
+        let hud_view = gpu.upload_hud(&hud).create_view(&Default::default());
         let bind = dev.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("blit"),
             layout: &gpu.blit_layout,
@@ -467,6 +611,10 @@ impl Viewer {
                 wgpu::BindGroupEntry {
                     binding: 1,
                     resource: wgpu::BindingResource::Sampler(&gpu.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&hud_view),
                 },
             ],
         });
@@ -528,6 +676,8 @@ impl Viewer {
                     'n' => self.step_once = true,
                     'r' => self.reset = true,
                     'm' => self.markers = !self.markers,
+                    'x' => self.overlays = !self.overlays,
+                    't' => self.hud = !self.hud,
                     'p' => self.screenshot = true,
                     'c' => {
                         let n = self
