@@ -175,6 +175,27 @@ pub struct HeldDesc {
     pub select: NodeSelect,
 }
 
+/// One leg of the `route` expert: drive the base to a pose while the hand moves to a target.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RouteStep {
+    /// Base goal: x, y (m, world frame) and heading (degrees).
+    pub base: (f64, f64, f64),
+    /// Hand goal in the base frame, m (default: stay where the hand's target is).
+    #[serde(default)]
+    pub hand: Option<(f64, f64, f64)>,
+    /// Gripper state from this leg on (default: as on the leg before; open at the start).
+    #[serde(default)]
+    pub closed: Option<bool>,
+    /// Base speed limit on this leg, m/s (default 0.4).
+    #[serde(default)]
+    pub speed: Option<f64>,
+    /// The leg ends when the base is within this distance (m) of its goal and within 3 degrees
+    /// of its heading, and the hand within 2 cm of its goal (default 0.05 m).
+    #[serde(default)]
+    pub tolerance: Option<f64>,
+}
+
 /// The `task` section.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -218,6 +239,9 @@ pub struct TaskDesc {
     /// A deformable in the robot's hand from the start.
     #[serde(default)]
     pub held: Option<HeldDesc>,
+    /// Legs of the `route` expert, in order (a section that gives any replaces the parent's).
+    #[serde(default)]
+    pub route: Vec<RouteStep>,
 }
 
 impl TaskDesc {
@@ -244,6 +268,11 @@ impl TaskDesc {
             observations: merge(parent.observations, self.observations),
             events: merge(parent.events, self.events),
             held: self.held.or(parent.held),
+            route: if self.route.is_empty() {
+                parent.route
+            } else {
+                self.route
+            },
         }
     }
 }

@@ -10,6 +10,7 @@ use modesuite_engine::{Env, RigidContext, SimSettings, Space};
 use modesuite_robots::{ArmMode, BaseMode, GripperMode, RobotObservation, RobotRuntime, Robots};
 use nalgebra::{UnitQuaternion, Vector2, Vector3};
 
+use crate::desc::RouteStep;
 use crate::manager::{Task, TaskPoints};
 
 /// Which policy.
@@ -121,31 +122,41 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     "the {name} expert needs continuous actions (the robot has discrete keys)"
                 ));
             }
+            // Every expert drives the base by velocity; `arm_off` says whether it can do without
+            // an arm action.
+            let check = |arm_off: bool| {
+                let arm_ok = matches!(modes.arm, ArmMode::EePoseDelta | ArmMode::EePoseAbsolute)
+                    || (arm_off && modes.arm == ArmMode::Off);
+                if matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion) && arm_ok {
+                    return Ok(());
+                }
+                Err(format!(
+                    "the {name} expert drives base: Velocity or Locomotion and arm: EePoseDelta or EePoseAbsolute{}; this run has base {:?}, arm {:?}",
+                    if arm_off { " or Off" } else { "" },
+                    modes.base,
+                    modes.arm
+                ))
+            };
             match name.as_str() {
                 "place" => {
-                    if !matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion)
-                        || !matches!(modes.arm, ArmMode::EePoseDelta | ArmMode::EePoseAbsolute)
-                    {
-                        return Err(format!(
-                            "the place expert drives base: Velocity or Locomotion and arm: EePoseDelta or EePoseAbsolute; this run has base {:?}, arm {:?}",
-                            modes.base, modes.arm
-                        ));
-                    }
+                    check(false)?;
                     Ok(Box::new(PlaceExpert { robot, start: None }))
                 }
                 "curtain" => {
-                    if !matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion)
-                        || !matches!(
-                            modes.arm,
-                            ArmMode::EePoseDelta | ArmMode::EePoseAbsolute | ArmMode::Off
-                        )
-                    {
-                        return Err(format!(
-                            "the curtain expert drives base: Velocity or Locomotion and arm: EePoseDelta, EePoseAbsolute or Off; this run has base {:?}, arm {:?}",
-                            modes.base, modes.arm
-                        ));
-                    }
+                    check(true)?;
                     Ok(Box::new(CurtainExpert { robot }))
+                }
+                "route" => {
+                    let route = task.model.desc.route.clone();
+                    if route.is_empty() {
+                        return Err("the route expert needs the task's `route` legs".into());
+                    }
+                    check(route.iter().all(|l| l.hand.is_none()))?;
+                    Ok(Box::new(RouteExpert {
+                        robot,
+                        route,
+                        leg: 0,
+                    }))
                 }
                 other => Err(format!("no scripted expert named \"{other}\"")),
             }
@@ -306,3 +317,77 @@ impl Policy for CurtainExpert {
         write_action(env, rt, yaw, (v, -2.0 * yaw), hold, false, action)
     }
 }
+
+/// Route: the task's `route` legs in order. On each leg the base is driven to its goal pose (a
+/// proportional controller on position and heading, speed-limited), the hand target moves to
+/// its goal (base frame) at up to 0.25 m/s, and the gripper is set; the leg ends when all are
+/// within tolerance. The last leg is held.
+struct RouteExpert {
+    robot: String,
+    route: Vec<RouteStep>,
+    leg: usize,
+}
+
+impl Policy for RouteExpert {
+    fn reset(&mut self, _seed: u64) {
+        self.leg = 0;
+    }
+
+    fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
+        if env
+            .app
+            .world
+            .resource::<modesuite_engine::SimClock>()
+            .episode_steps
+            == 0
+        {
+            self.leg = 0;
+        }
+        let rt = robot_of(env, &self.robot)?;
+        let (obs, yaw) = observe(env, rt)?;
+        let dt = step_dt(env);
+        let b = obs.base.translation.vector.xy();
+        let cur = rt.ee_target.translation.vector;
+        let closed = self.route[..=self.leg]
+            .iter()
+            .rev()
+            .find_map(|l| l.closed)
+            .unwrap_or(false);
+        let leg = &self.route[self.leg];
+        let goal = Vector2::new(leg.base.0, leg.base.1);
+        let heading = leg.base.2.to_radians();
+        let err = goal - b;
+        let dyaw = (heading - yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        let hand_goal = leg.hand.map(|h| Vector3::new(h.0, h.1, h.2));
+        let hand_err = hand_goal.map_or(0.0, |h| (h - cur).norm());
+        let tol = leg.tolerance.unwrap_or(0.05);
+        if err.norm() < tol
+            && dyaw.abs() < 3f64.to_radians()
+            && hand_err < 0.02
+            && self.leg + 1 < self.route.len()
+        {
+            self.leg += 1;
+        }
+        let speed = leg.speed.unwrap_or(0.4);
+        let mut v = 1.5 * err;
+        if v.norm() > speed {
+            v *= speed / v.norm();
+        }
+        let wz = (2.0 * dyaw).clamp(-0.6, 0.6);
+        let ee = match hand_goal {
+            Some(h) => {
+                let d = h - cur;
+                let max = 0.25 * dt;
+                if d.norm() > max {
+                    cur + d * (max / d.norm())
+                } else {
+                    h
+                }
+            }
+            None => cur,
+        };
+        write_action(env, rt, yaw, (v, wz), ee, closed, action)
+    }
+}
+

@@ -45,11 +45,12 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 4] = [
+pub const IMPLEMENTED: [&str; 5] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
     "MoDe-Spot-Curtain-v0",
+    "MoDe-Franka-Bend-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -93,6 +94,14 @@ pub fn task_scene_path(scenes_dir: &Path, id: &str) -> Result<PathBuf, String> {
 /// Scene and task files compiled into the binary, by path under `scenes/` (task ids resolve to
 /// them when the scenes folder is not on disk; `extends` inside them resolves here too).
 pub const EMBEDDED: &[(&str, &str)] = &[
+    (
+        "bend/bend.task.ron",
+        include_str!("../../../scenes/bend/bend.task.ron"),
+    ),
+    (
+        "bend/franka.scene.ron",
+        include_str!("../../../scenes/bend/franka.scene.ron"),
+    ),
     (
         "place/place.task.ron",
         include_str!("../../../scenes/place/place.task.ron"),

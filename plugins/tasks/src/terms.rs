@@ -251,6 +251,21 @@ struct DistanceParams {
     planar: bool,
     #[serde(default)]
     norm: Norm,
+    /// `within` only: the distance below which the term is 1, m.
+    #[serde(default)]
+    max: Option<f64>,
+}
+
+impl DistanceParams {
+    fn measure(&self, mut d: Vector3<f64>) -> f64 {
+        if self.planar {
+            d.z = 0.0;
+        }
+        match self.norm {
+            Norm::L2 => d.norm(),
+            Norm::L1 => d.abs().sum(),
+        }
+    }
 }
 
 #[derive(Deserialize)]
@@ -379,16 +394,29 @@ pub fn register_library(app: &mut SimApp) {
         Reward,
         "distance between two points (a, b, planar: xy only, norm: L2 | L1), m",
         factory(|p: DistanceParams, cfg| {
+            if p.max.is_some() {
+                return Err("max: only for the `within` term".into());
+            }
             let (a, b) = (cfg.point(&p.a)?, cfg.point(&p.b)?);
             Ok(term(1, move |c, out| {
-                let mut d = c.point(a) - c.point(b);
-                if p.planar {
-                    d.z = 0.0;
-                }
-                out[0] = match p.norm {
-                    Norm::L2 => d.norm(),
-                    Norm::L1 => d.abs().sum(),
-                };
+                out[0] = p.measure(c.point(a) - c.point(b));
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "within",
+        Termination,
+        "1 when the distance between a and b (planar, norm as `distance`) is below max (m), else 0",
+        factory(|p: DistanceParams, cfg| {
+            let max = match p.max {
+                Some(m) if m.is_finite() && m > 0.0 => m,
+                other => return Err(format!("max = {other:?}: a positive distance, m")),
+            };
+            let (a, b) = (cfg.point(&p.a)?, cfg.point(&p.b)?);
+            Ok(term(1, move |c, out| {
+                out[0] = f64::from(u8::from(p.measure(c.point(a) - c.point(b)) < max));
                 Ok(())
             }))
         }),
