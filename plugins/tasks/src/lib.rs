@@ -45,12 +45,13 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 5] = [
+pub const IMPLEMENTED: [&str; 6] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
     "MoDe-Spot-Curtain-v0",
     "MoDe-Franka-Bend-v0",
+    "MoDe-Spot-Bend-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -101,6 +102,10 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "bend/franka.scene.ron",
         include_str!("../../../scenes/bend/franka.scene.ron"),
+    ),
+    (
+        "bend/spot.scene.ron",
+        include_str!("../../../scenes/bend/spot.scene.ron"),
     ),
     (
         "place/place.task.ron",
