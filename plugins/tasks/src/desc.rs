@@ -58,6 +58,17 @@ pub enum PointRef {
     },
     /// A fixed world point.
     Const((f64, f64, f64)),
+    /// Staged goals: the first of `stages` that the point `by` has not yet come within `reach`
+    /// (m, in x and y) of, in order; the last once all are reached. Progress belongs to the
+    /// episode (reset at every reset, saved in snapshots).
+    Stages {
+        /// The goals in order.
+        stages: Vec<PointRef>,
+        /// The point that has to reach them.
+        by: Box<PointRef>,
+        /// Planar distance that counts as reached, m.
+        reach: f64,
+    },
 }
 
 /// A target: a world point randomised uniformly within `pos +- range` at every reset.

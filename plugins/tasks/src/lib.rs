@@ -45,13 +45,14 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 6] = [
+pub const IMPLEMENTED: [&str; 7] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
     "MoDe-Spot-Curtain-v0",
     "MoDe-Franka-Bend-v0",
     "MoDe-Spot-Bend-v0",
+    "MoDe-Franka-Transport-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -106,6 +107,14 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "bend/spot.scene.ron",
         include_str!("../../../scenes/bend/spot.scene.ron"),
+    ),
+    (
+        "transport/transport.task.ron",
+        include_str!("../../../scenes/transport/transport.task.ron"),
+    ),
+    (
+        "transport/franka.scene.ron",
+        include_str!("../../../scenes/transport/franka.scene.ron"),
     ),
     (
         "place/place.task.ron",

@@ -131,6 +131,14 @@ enum Resolved {
     Object(String),
     Nodes { object: Entity, nodes: Vec<u32> },
     Const(Vector3<f64>),
+    /// Indices of the stage points and of the follower (earlier in the list), the reach, and
+    /// the slot of the progress in [`TaskState::stages`].
+    Stages {
+        stages: Vec<usize>,
+        by: usize,
+        reach: f64,
+        slot: usize,
+    },
 }
 
 /// The task of one env: the model and the points resolved at spawn (immutable).
@@ -162,6 +170,8 @@ pub struct TaskState {
     pub history: Vec<VecDeque<Vec<f32>>>,
     /// Whether the current episode has succeeded.
     pub success: bool,
+    /// Progress of every `Stages` point: the index of its current stage.
+    pub stages: Vec<usize>,
 }
 
 impl Stateful for TaskState {
@@ -190,6 +200,9 @@ impl Stateful for TaskState {
             }
         }
         h.write_u64(u64::from(self.success));
+        for s in &self.stages {
+            h.write_u64(*s as u64);
+        }
     }
 }
 
@@ -584,6 +597,7 @@ impl SceneSection for TaskSection {
             ))
         };
         let mut points = Vec::new();
+        let mut n_stages = 0;
         for p in &model.points {
             points.push(match p {
                 PointRef::Target(t) => Resolved::Target(model.target_index(t).unwrap_or(0)),
@@ -612,8 +626,24 @@ impl SceneSection for TaskSection {
                     }
                 }
                 PointRef::Const(c) => Resolved::Const(Vector3::new(c.0, c.1, c.2)),
+                PointRef::Stages { stages, by, reach } => {
+                    let index = |q: &PointRef| {
+                        model.points.iter().position(|x| x == q).ok_or_else(|| {
+                            serr(path, format!("{q:?}"), "an interned point (internal)")
+                        })
+                    };
+                    Resolved::Stages {
+                        stages: stages.iter().map(index).collect::<Result<_, _>>()?,
+                        by: index(by)?,
+                        reach: *reach,
+                        slot: n_stages,
+                    }
+                }
                 PointRef::Point(_) => return Err(serr(path, format!("{p:?}"), "a resolved point")),
             });
+            if matches!(points.last(), Some(Resolved::Stages { .. })) {
+                n_stages += 1;
+            }
         }
         let cloths: Vec<(String, Entity)> = app
             .world
@@ -684,6 +714,7 @@ impl SceneSection for TaskSection {
             prev_action: Vec::new(),
             history: vec![VecDeque::new(); model.groups.len()],
             success: false,
+            stages: vec![0; n_stages],
         };
         app.world.insert_resource(task);
         app.world.insert_resource(state);
@@ -737,17 +768,18 @@ pub fn add_task_systems(app: &mut SimApp) {
     );
 }
 
+/// The task's points now, in point order; a `Stages` point moves on to its next stage when
+/// its follower is within reach of the current one (progress kept in `state.stages`).
 fn resolve_points(
     task: &Task,
-    state: &TaskState,
+    state: &mut TaskState,
     robot: &RobotObservation,
     world: &modesuite_engine::terms::WorldView,
     nodes: &Query<&DeformableNodes>,
 ) -> Result<Vec<Vector3<f64>>, String> {
-    task.points
-        .iter()
-        .map(|p| {
-            Ok(match p {
+    let mut out: Vec<Vector3<f64>> = Vec::with_capacity(task.points.len());
+    for p in &task.points {
+        let v = match p {
                 Resolved::Target(i) => state.targets.get(*i).copied().unwrap_or_default(),
                 Resolved::Base => robot.base.translation.vector,
                 Resolved::Ee => robot.ee.translation.vector,
@@ -766,9 +798,23 @@ fn resolve_points(
                     c / idx.len().max(1) as f64
                 }
                 Resolved::Const(c) => *c,
-            })
-        })
-        .collect()
+                Resolved::Stages {
+                    stages,
+                    by,
+                    reach,
+                    slot,
+                } => {
+                    let k = &mut state.stages[*slot];
+                    while *k + 1 < stages.len() && (out[*by] - out[stages[*k]]).xy().norm() < *reach
+                    {
+                        *k += 1;
+                    }
+                    out[stages[*k]]
+                }
+        };
+        out.push(v);
+    }
+    Ok(out)
 }
 
 /// Evaluates one term into a fresh buffer, checking its values.
@@ -1002,6 +1048,7 @@ fn task_reset(
     };
     let m = &task.model;
     state.success = false;
+    state.stages.iter_mut().for_each(|k| *k = 0);
     state.prev_action.clear();
     for h in state.history.iter_mut() {
         h.clear();

@@ -77,6 +77,25 @@ impl Configure<'_> {
             PointRef::Const(c) if !(c.0.is_finite() && c.1.is_finite() && c.2.is_finite()) => {
                 return Err(format!("Const({c:?}): finite coordinates"))
             }
+            PointRef::Stages { stages, by, reach } => {
+                if stages.is_empty() || !(reach.is_finite() && *reach > 0.0) {
+                    return Err(format!(
+                        "Stages(reach: {reach}, {} stages): at least one stage and a positive reach, m",
+                        stages.len()
+                    ));
+                }
+                // The parts are interned first (they are resolved before the stages point)
+                // and stored in their canonical form.
+                let mut canon = |q: &PointRef| -> Result<PointRef, String> {
+                    let id = self.point(q)?;
+                    Ok(self.table[id.0].clone())
+                };
+                p = PointRef::Stages {
+                    stages: stages.iter().map(&mut canon).collect::<Result<_, _>>()?,
+                    by: Box::new(canon(by)?),
+                    reach: *reach,
+                };
+            }
             _ => {}
         }
         if let Some(i) = self.table.iter().position(|q| *q == p) {
