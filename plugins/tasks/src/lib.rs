@@ -45,7 +45,7 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 7] = [
+pub const IMPLEMENTED: [&str; 8] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
@@ -53,6 +53,7 @@ pub const IMPLEMENTED: [&str; 7] = [
     "MoDe-Franka-Bend-v0",
     "MoDe-Spot-Bend-v0",
     "MoDe-Franka-Transport-v0",
+    "MoDe-Spot-Transport-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -115,6 +116,10 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "transport/franka.scene.ron",
         include_str!("../../../scenes/transport/franka.scene.ron"),
+    ),
+    (
+        "transport/spot.scene.ron",
+        include_str!("../../../scenes/transport/spot.scene.ron"),
     ),
     (
         "place/place.task.ron",
