@@ -337,13 +337,14 @@ fn physics_blow_up_ends_the_episode_with_a_reason_not_the_process() {
     for i in 0..10 {
         let o = env.step(&[0.0]);
         if o.truncated {
-            ended = Some((i, o.info.error.clone()));
+            ended = Some((i, o.info.error.clone(), o.reward));
             break;
         }
     }
     println!("blow-up: {ended:?}");
-    let (step, err) = ended.expect("the episode ended");
+    let (step, err, reward) = ended.expect("the episode ended");
     assert_eq!(step, 3);
+    assert_eq!(reward, 0.0, "a failed step's reward is 0");
     assert!(err.expect("error").contains("non-finite"));
     // The env goes on after the autoreset.
     let o = env.step(&[0.0]);

@@ -103,6 +103,12 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Spot-Place-v0", 41, 9),
         ("MoDe-Franka-Curtain-v0", 43, 10),
         ("MoDe-Spot-Curtain-v0", 41, 10),
+        ("MoDe-Franka-Bend-v0", 43, 9),
+        ("MoDe-Spot-Bend-v0", 41, 9),
+        ("MoDe-Franka-Transport-v0", 43, 9),
+        ("MoDe-Spot-Transport-v0", 41, 9),
+        ("MoDe-Franka-Drag-v0", 43, 9),
+        ("MoDe-Spot-Drag-v0", 41, 9),
     ] {
         let env = make(id, None);
         let s = env.spaces();
@@ -174,6 +180,78 @@ fn curtain_success_and_frame_contact_on_constructed_states() {
         assert_eq!(o.terminated, success || touched);
         assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
     }
+}
+
+#[test]
+fn transport_goal_moves_from_t1_to_t2_once_the_base_reaches_t1() {
+    let mut env = make("MoDe-Franka-Transport-v0", None);
+    let zero = [0.0f32; 9];
+    let goal = |env: &Env| point(env, "goal");
+    assert_eq!(goal(&env), point(&env, "t1"), "T1 first");
+    // T1 0.6 m from the base: not reached; the reward measures to T1.
+    let b = base(&env).translation.vector;
+    env.app.world.resource_mut::<TaskState>().targets[0] = b + Vector3::new(0.6, 0.0, 0.0);
+    let o = env.step(&zero);
+    let (b, end, g) = (
+        base(&env).translation.vector,
+        point(&env, "rod_end"),
+        goal(&env),
+    );
+    assert_eq!(g, point(&env, "t1"));
+    let hand = -((end - g).xy().norm() + (b - g).xy().norm());
+    println!(
+        "T1 0.6 m away: reward {:.6}, hand-computed {hand:.6}",
+        o.reward
+    );
+    assert!((o.reward - hand).abs() < 1e-9);
+    // T1 0.3 m from the base: reached, the goal is T2 from this step on.
+    env.app.world.resource_mut::<TaskState>().targets[0] = b + Vector3::new(0.3, 0.0, 0.0);
+    env.step(&zero);
+    assert_eq!(goal(&env), point(&env, "t2"), "T2 after T1 is reached");
+    assert_eq!(env.app.world.resource::<TaskState>().stages, vec![1]);
+    // Moving T1 away again does not bring it back (progress is kept) ...
+    env.app.world.resource_mut::<TaskState>().targets[0] = Vector3::new(-5.0, 0.0, 0.0);
+    env.step(&zero);
+    assert_eq!(goal(&env), point(&env, "t2"));
+    // ... until the next reset.
+    env.reset(Some(1));
+    assert_eq!(env.app.world.resource::<TaskState>().stages, vec![0]);
+    assert_eq!(goal(&env), point(&env, "t1"));
+}
+
+#[test]
+fn bend_and_drag_success_need_every_condition() {
+    // Bend: L1_xy(rod end, T) < 0.5.
+    for (dx, dy, expect) in [(0.3, 0.15, true), (0.3, 0.25, false)] {
+        let mut env = make("MoDe-Franka-Bend-v0", None);
+        let end = point(&env, "rod_end");
+        env.app.world.resource_mut::<TaskState>().targets[0] = end + Vector3::new(dx, dy, 0.0);
+        let o = env.step(&[0.0; 9]);
+        println!(
+            "bend: target ({dx}, {dy}) from the end: success {:?}",
+            o.info.success
+        );
+        assert_eq!(o.info.success, Some(expect));
+    }
+    // Drag: both targets on the spot (distance sum ~0) but the belt is still on the near side
+    // of the post: no success; the sum condition alone is met.
+    let mut env = make("MoDe-Franka-Drag-v0", None);
+    let (mid, b) = (point(&env, "belt_mid"), base(&env).translation.vector);
+    {
+        let mut st = env.app.world.resource_mut::<TaskState>();
+        // targets in name order: "belt", "robot"
+        st.targets[0] = mid;
+        st.targets[1] = b;
+    }
+    let o = env.step(&[0.0; 9]);
+    let v = &o.info.values;
+    println!(
+        "drag: near_targets {}, beyond_post {}, success {:?}",
+        v["success/near_targets"], v["success/beyond_post"], o.info.success
+    );
+    assert_eq!(v["success/near_targets"], 1.0);
+    assert_eq!(v["success/beyond_post"], 0.0);
+    assert_eq!(o.info.success, Some(false));
 }
 
 #[test]
@@ -320,11 +398,53 @@ fn an_episode_ends_on_success_or_time_out_with_the_right_flags() {
     assert_eq!(o.info.final_info.unwrap().success, Some(false));
 }
 
-#[test]
-fn every_expert_succeeds_on_several_seeds() {
-    for id in modesuite::tasks::IMPLEMENTED {
+/// The experts of one task (both robots) on four seeds; one test per task so the test
+/// threads share them.
+fn task_experts(task: &str) {
+    let ids: Vec<_> = modesuite::tasks::IMPLEMENTED
+        .iter()
+        .filter(|id| id.ends_with(&format!("-{task}-v0")))
+        .collect();
+    assert!(!ids.is_empty(), "no {task} environment");
+    for id in ids {
         expert_seeds(id, &[0, 7, 13, 21]);
     }
+}
+
+#[test]
+fn every_implemented_environment_has_its_expert_tested() {
+    for id in modesuite::tasks::IMPLEMENTED {
+        let task = id.split('-').nth(2).unwrap();
+        assert!(
+            ["Place", "Curtain", "Bend", "Transport", "Drag"].contains(&task),
+            "{id}: add an expert test for {task}"
+        );
+    }
+}
+
+#[test]
+fn place_experts_succeed_on_several_seeds() {
+    task_experts("Place");
+}
+
+#[test]
+fn curtain_experts_succeed_on_several_seeds() {
+    task_experts("Curtain");
+}
+
+#[test]
+fn bend_experts_succeed_on_several_seeds() {
+    task_experts("Bend");
+}
+
+#[test]
+fn transport_experts_succeed_on_several_seeds() {
+    task_experts("Transport");
+}
+
+#[test]
+fn drag_experts_succeed_on_several_seeds() {
+    task_experts("Drag");
 }
 
 fn expert_seeds(id: &str, seeds: &[u64]) {
@@ -381,6 +501,24 @@ fn task_section_errors_name_the_entry() {
     assert!(e.contains("table") && e.contains("deformable"), "{e}");
     let e = scene_error(&scene(r#"events: {"e": RobotPose(xy: -1.0, yaw: 0.1)},"#));
     assert!(e.contains(r#"events["e"]"#), "{e}");
+    // within / sum_within need a positive max; Stages a positive reach and a stage.
+    let e = scene_error(&scene(
+        r#"success: {"w": (term: "within", params: (a: Base, b: Ee))},"#,
+    ));
+    assert!(e.contains(r#"success["w"]"#) && e.contains("max"), "{e}");
+    let e = scene_error(&scene(
+        r#"success: {"w": (term: "sum_within", params: (pairs: [], max: 0.4))},"#,
+    ));
+    assert!(e.contains("pairs"), "{e}");
+    let e = scene_error(&scene(
+        r#"points: {"g": Stages(stages: [Target("table")], by: Base, reach: 0.0)},"#,
+    ));
+    assert!(e.contains("reach"), "{e}");
+    // The route expert needs route legs.
+    let app = place_app(&scene(r#"expert: "route","#));
+    let env = Env::new(app);
+    let err = make_policy(PolicyKind::Scripted, &env).err().unwrap();
+    assert!(err.contains("route"), "{err}");
     // An override of the parent's reward by name.
     let app = place_app(&scene(
         r#"rewards: {"base_to_target": (term: "distance", weight: -0.5, params: (a: Base, b: Target("table"), planar: true))},"#,

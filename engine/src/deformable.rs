@@ -292,10 +292,13 @@ fn deformable_step<S: DeformableSolver>(
             Some(r) => r,
             None => &NoColliders,
         };
+        let before = reactions.len();
         if let Err(e) = body
             .solver
             .step_coupled(dt, &settings.gravity, query, &mut reactions)
         {
+            // The solver rolled its state back: the impulses of the failed step never happened.
+            reactions.truncate(before);
             let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
             errors.raise(format!("object \"{name}\": {e}"));
         }

@@ -189,7 +189,7 @@ pub struct EpisodeStats {
 pub struct StepOutcome {
     /// Observation (of the next episode when this one ended).
     pub observation: Vec<f32>,
-    /// Reward.
+    /// Reward (0 on a step that ended with an error).
     pub reward: f64,
     /// Terminal state reached.
     pub terminated: bool,
@@ -300,6 +300,10 @@ impl Env {
         let mut reward = signals.reward;
         if !reward.is_finite() {
             error.get_or_insert_with(|| format!("reward = {reward}: non-finite"));
+        }
+        // A step that failed (physics blow-up, bad action, plugin error) measured a state that
+        // is not the physics': its reward is 0 (the terms stay in `info.values`).
+        if error.is_some() {
             reward = 0.0;
         }
         let terminated = signals.terminated && error.is_none();

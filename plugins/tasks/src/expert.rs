@@ -390,4 +390,3 @@ impl Policy for RouteExpert {
         write_action(env, rt, yaw, (v, wz), ee, closed, action)
     }
 }
-

@@ -45,7 +45,7 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 8] = [
+pub const IMPLEMENTED: [&str; 10] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
@@ -54,6 +54,8 @@ pub const IMPLEMENTED: [&str; 8] = [
     "MoDe-Spot-Bend-v0",
     "MoDe-Franka-Transport-v0",
     "MoDe-Spot-Transport-v0",
+    "MoDe-Franka-Drag-v0",
+    "MoDe-Spot-Drag-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -120,6 +122,18 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "transport/spot.scene.ron",
         include_str!("../../../scenes/transport/spot.scene.ron"),
+    ),
+    (
+        "drag/drag.task.ron",
+        include_str!("../../../scenes/drag/drag.task.ron"),
+    ),
+    (
+        "drag/franka.scene.ron",
+        include_str!("../../../scenes/drag/franka.scene.ron"),
+    ),
+    (
+        "drag/spot.scene.ron",
+        include_str!("../../../scenes/drag/spot.scene.ron"),
     ),
     (
         "place/place.task.ron",

@@ -129,7 +129,10 @@ enum Resolved {
     Base,
     Ee,
     Object(String),
-    Nodes { object: Entity, nodes: Vec<u32> },
+    Nodes {
+        object: Entity,
+        nodes: Vec<u32>,
+    },
     Const(Vector3<f64>),
     /// Indices of the stage points and of the follower (earlier in the list), the reach, and
     /// the slot of the progress in [`TaskState::stages`].
@@ -780,37 +783,36 @@ fn resolve_points(
     let mut out: Vec<Vector3<f64>> = Vec::with_capacity(task.points.len());
     for p in &task.points {
         let v = match p {
-                Resolved::Target(i) => state.targets.get(*i).copied().unwrap_or_default(),
-                Resolved::Base => robot.base.translation.vector,
-                Resolved::Ee => robot.ee.translation.vector,
-                Resolved::Object(o) => world
-                    .object(o)
-                    .map(|v| v.pose.translation.vector)
-                    .ok_or_else(|| format!("object \"{o}\" is gone"))?,
-                Resolved::Nodes { object, nodes: idx } => {
-                    let n = nodes
-                        .get(*object)
-                        .map_err(|_| "a deformable object lost its nodes".to_string())?;
-                    let mut c = Vector3::zeros();
-                    for &i in idx {
-                        c += n.0[i as usize];
-                    }
-                    c / idx.len().max(1) as f64
+            Resolved::Target(i) => state.targets.get(*i).copied().unwrap_or_default(),
+            Resolved::Base => robot.base.translation.vector,
+            Resolved::Ee => robot.ee.translation.vector,
+            Resolved::Object(o) => world
+                .object(o)
+                .map(|v| v.pose.translation.vector)
+                .ok_or_else(|| format!("object \"{o}\" is gone"))?,
+            Resolved::Nodes { object, nodes: idx } => {
+                let n = nodes
+                    .get(*object)
+                    .map_err(|_| "a deformable object lost its nodes".to_string())?;
+                let mut c = Vector3::zeros();
+                for &i in idx {
+                    c += n.0[i as usize];
                 }
-                Resolved::Const(c) => *c,
-                Resolved::Stages {
-                    stages,
-                    by,
-                    reach,
-                    slot,
-                } => {
-                    let k = &mut state.stages[*slot];
-                    while *k + 1 < stages.len() && (out[*by] - out[stages[*k]]).xy().norm() < *reach
-                    {
-                        *k += 1;
-                    }
-                    out[stages[*k]]
+                c / idx.len().max(1) as f64
+            }
+            Resolved::Const(c) => *c,
+            Resolved::Stages {
+                stages,
+                by,
+                reach,
+                slot,
+            } => {
+                let k = &mut state.stages[*slot];
+                while *k + 1 < stages.len() && (out[*by] - out[stages[*k]]).xy().norm() < *reach {
+                    *k += 1;
                 }
+                out[stages[*k]]
+            }
         };
         out.push(v);
     }

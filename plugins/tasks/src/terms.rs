@@ -289,6 +289,41 @@ impl DistanceParams {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
+struct SumWithinParams {
+    pairs: Vec<DistanceParams>,
+    max: f64,
+}
+
+/// 1 when the summed distances of `pairs` are below `max`, else 0.
+fn within_term(
+    pairs: Vec<DistanceParams>,
+    max: Option<f64>,
+    cfg: &mut Configure,
+) -> Result<Arc<dyn TaskTerm>, String> {
+    let max = match max {
+        Some(m) if m.is_finite() && m > 0.0 => m,
+        other => return Err(format!("max = {other:?}: a positive distance, m")),
+    };
+    if pairs.is_empty() || pairs.iter().any(|p| p.max.is_some()) {
+        return Err("pairs: at least one (a, b, planar, norm) without its own max".into());
+    }
+    let ids = pairs
+        .iter()
+        .map(|p| Ok((cfg.point(&p.a)?, cfg.point(&p.b)?)))
+        .collect::<Result<Vec<_>, String>>()?;
+    Ok(term(1, move |c, out| {
+        let sum: f64 = pairs
+            .iter()
+            .zip(&ids)
+            .map(|(p, (a, b))| p.measure(c.point(*a) - c.point(*b)))
+            .sum();
+        out[0] = f64::from(u8::from(sum < max));
+        Ok(())
+    }))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct InBoxParams {
     point: PointRef,
     center: PointRef,
@@ -428,17 +463,17 @@ pub fn register_library(app: &mut SimApp) {
         "within",
         Termination,
         "1 when the distance between a and b (planar, norm as `distance`) is below max (m), else 0",
-        factory(|p: DistanceParams, cfg| {
-            let max = match p.max {
-                Some(m) if m.is_finite() && m > 0.0 => m,
-                other => return Err(format!("max = {other:?}: a positive distance, m")),
-            };
-            let (a, b) = (cfg.point(&p.a)?, cfg.point(&p.b)?);
-            Ok(term(1, move |c, out| {
-                out[0] = f64::from(u8::from(p.measure(c.point(a) - c.point(b)) < max));
-                Ok(())
-            }))
+        factory(|mut p: DistanceParams, cfg| {
+            let max = p.max.take();
+            within_term(vec![p], max, cfg)
         }),
+    );
+    reg(
+        app,
+        "sum_within",
+        Termination,
+        "1 when the sum of the distances of `pairs` [(a, b, planar, norm)] is below max (m), else 0",
+        factory(|p: SumWithinParams, cfg| within_term(p.pairs, Some(p.max), cfg)),
     );
     reg(
         app,
