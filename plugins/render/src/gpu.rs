@@ -472,7 +472,8 @@ pub struct Targets {
     light: LightDesc,
 }
 
-fn texture(
+/// A 2-D texture of one mip level and sample.
+pub(crate) fn texture(
     device: &wgpu::Device,
     label: &str,
     w: u32,

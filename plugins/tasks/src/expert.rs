@@ -189,6 +189,15 @@ fn observe(env: &Env, rt: &RobotRuntime) -> Result<(RobotObservation, f64), Stri
     Ok((obs, yaw))
 }
 
+/// Whether the env is at the first step of an episode (experts drop their memory then).
+fn episode_start(env: &Env) -> bool {
+    env.app
+        .world
+        .resource::<modesuite_engine::SimClock>()
+        .episode_steps
+        == 0
+}
+
 /// Length of one env step, s.
 fn step_dt(env: &Env) -> f64 {
     let s = env.app.world.resource::<SimSettings>();
@@ -275,13 +284,7 @@ impl Policy for PlaceExpert {
         // -0.4 .. +0.7 m of the start.
         let dt = step_dt(env);
         let cur = rt.ee_target.translation.vector;
-        if env
-            .app
-            .world
-            .resource::<modesuite_engine::SimClock>()
-            .episode_steps
-            == 0
-        {
+        if episode_start(env) {
             self.start = None;
         }
         let dz = (3.0 * (table.z + 0.08 - end.z)).clamp(-0.25, 0.25) * dt;
@@ -334,13 +337,7 @@ impl Policy for RouteExpert {
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
-        if env
-            .app
-            .world
-            .resource::<modesuite_engine::SimClock>()
-            .episode_steps
-            == 0
-        {
+        if episode_start(env) {
             self.leg = 0;
         }
         let rt = robot_of(env, &self.robot)?;
