@@ -657,8 +657,13 @@ impl Recorder {
     }
 
     /// Renders and writes the current frame when `step` is on the recording stride; with
-    /// `--overlays` also the markers and the `status` text.
-    fn capture(&mut self, world: &World, step: u64, status: &str) -> Result<(), CliError> {
+    /// `--overlays` also the markers and the text `status` makes (only called then).
+    fn capture(
+        &mut self,
+        world: &World,
+        step: u64,
+        status: impl FnOnce() -> String,
+    ) -> Result<(), CliError> {
         if !step.is_multiple_of(self.every) {
             return Ok(());
         }
@@ -691,7 +696,7 @@ impl Recorder {
         };
         if self.overlays {
             let (w, h) = (frame.width, frame.height);
-            let lines = [status.to_string()];
+            let lines = [status()];
             modesuite_render::hud::draw_text(&mut frame.rgb, w, h, 3, (4, 4), 1, &lines, [255; 3]);
         }
         let frame = &frame;
@@ -866,11 +871,9 @@ fn run_scene(
         env.reset(Some(seed));
         policy.reset(seed);
         if let Some(r) = recorder.as_mut() {
-            r.capture(
-                &env.app.world,
-                0,
-                &format!("episode {ep}  seed {seed}  step 0"),
-            )?;
+            r.capture(&env.app.world, 0, || {
+                format!("episode {ep}  seed {seed}  step 0")
+            })?;
         }
         let t = Instant::now();
         let mut ret = 0.0;
@@ -886,12 +889,13 @@ fn run_scene(
             ret += o.reward;
             length = i + 1;
             if let Some(r) = recorder.as_mut() {
-                let status = format!(
-                    "episode {ep}  step {length}  reward {:.3}  return {ret:.3}  success {}",
-                    o.reward,
-                    o.info.success.map_or("-".to_string(), |s| s.to_string())
-                );
-                r.capture(&env.app.world, length, &status)?;
+                r.capture(&env.app.world, length, || {
+                    format!(
+                        "episode {ep}  step {length}  reward {:.3}  return {ret:.3}  success {}",
+                        o.reward,
+                        o.info.success.map_or("-".to_string(), |s| s.to_string())
+                    )
+                })?;
             }
             progress.update(ep * steps + i + 1);
             if o.terminated || o.truncated {

@@ -599,8 +599,13 @@ impl SceneSection for TaskSection {
                     .collect(),
             ))
         };
-        let mut points = Vec::new();
-        let mut n_stages = 0;
+        let mut points: Vec<Resolved> = Vec::new();
+        let n_stages = |points: &[Resolved]| {
+            points
+                .iter()
+                .filter(|r| matches!(r, Resolved::Stages { .. }))
+                .count()
+        };
         for p in &model.points {
             points.push(match p {
                 PointRef::Target(t) => Resolved::Target(model.target_index(t).unwrap_or(0)),
@@ -639,14 +644,11 @@ impl SceneSection for TaskSection {
                         stages: stages.iter().map(index).collect::<Result<_, _>>()?,
                         by: index(by)?,
                         reach: *reach,
-                        slot: n_stages,
+                        slot: n_stages(&points),
                     }
                 }
                 PointRef::Point(_) => return Err(serr(path, format!("{p:?}"), "a resolved point")),
             });
-            if matches!(points.last(), Some(Resolved::Stages { .. })) {
-                n_stages += 1;
-            }
         }
         let cloths: Vec<(String, Entity)> = app
             .world
@@ -692,6 +694,7 @@ impl SceneSection for TaskSection {
                 .attach_to_body(body, pose, &nodes)
                 .map_err(|er| serr(&hpath, format!("{} nodes", nodes.len()), er.to_string()))?;
         }
+        let stage_slots = n_stages(&points);
         let task = Task {
             model: model.clone(),
             points,
@@ -717,7 +720,7 @@ impl SceneSection for TaskSection {
             prev_action: Vec::new(),
             history: vec![VecDeque::new(); model.groups.len()],
             success: false,
-            stages: vec![0; n_stages],
+            stages: vec![0; stage_slots],
         };
         app.world.insert_resource(task);
         app.world.insert_resource(state);
