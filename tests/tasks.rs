@@ -41,9 +41,16 @@ fn base(env: &Env) -> nalgebra::Isometry3<f64> {
 }
 
 fn scene_error(text: &str) -> String {
+    scene_error_in("place", text)
+}
+
+/// The error of compiling and spawning `text`, a scene in scenes/`task`.
+fn scene_error_in(task: &str, text: &str) -> String {
     let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
     let mut app = modesuite::cli::default_app();
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(task);
     match app
         .compile_scene(&desc, &SceneSource::in_memory(dir))
         .and_then(|m| app.spawn_scene(m))
@@ -53,26 +60,41 @@ fn scene_error(text: &str) -> String {
     }
 }
 
-/// The Franka Place scene file with `from` replaced by `to`.
-fn place_text(from: &str, to: &str) -> String {
+/// The Franka scene file of `task` (its folder under scenes/) with `from` replaced by `to`.
+fn task_text(task: &str, from: &str, to: &str) -> String {
     let text = std::fs::read_to_string(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place/franka.scene.ron"),
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("scenes")
+            .join(task)
+            .join("franka.scene.ron"),
     )
     .unwrap();
     assert!(text.contains(from), "{from}");
     text.replace(from, to)
 }
 
-/// An app with `text` (a scene in scenes/place) compiled and spawned.
-fn place_app(text: &str) -> modesuite::engine::SimApp {
+/// An app with `text` (a scene in scenes/`task`) compiled and spawned.
+fn task_app(task: &str, text: &str) -> modesuite::engine::SimApp {
     let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
     let mut app = modesuite::cli::default_app();
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(task);
     let model = app
         .compile_scene(&desc, &SceneSource::in_memory(dir))
-        .unwrap();
-    app.spawn_scene(model).unwrap();
+        .unwrap_or_else(|e| panic!("{e}"));
+    app.spawn_scene(model).unwrap_or_else(|e| panic!("{e}"));
     app
+}
+
+/// The Franka Place scene file with `from` replaced by `to`.
+fn place_text(from: &str, to: &str) -> String {
+    task_text("place", from, to)
+}
+
+/// An app with `text` (a scene in scenes/place) compiled and spawned.
+fn place_app(text: &str) -> modesuite::engine::SimApp {
+    task_app("place", text)
 }
 
 #[test]
@@ -109,6 +131,8 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Spot-Transport-v0", 41, 9),
         ("MoDe-Franka-Drag-v0", 43, 9),
         ("MoDe-Spot-Drag-v0", 41, 9),
+        ("MoDe-Franka-Lift-v0", 43, 10),
+        ("MoDe-Spot-Lift-v0", 41, 10),
     ] {
         let env = make(id, None);
         let s = env.spaces();
@@ -252,6 +276,76 @@ fn bend_and_drag_success_need_every_condition() {
     assert_eq!(v["success/near_targets"], 1.0);
     assert_eq!(v["success/beyond_post"], 0.0);
     assert_eq!(o.info.success, Some(false));
+}
+
+const LIFT: &str = "MoDe-Franka-Lift-v0";
+
+/// Franka Lift: base velocity, hand delta, gripper; the gripper closed (it holds the belt).
+const LIFT_HOLD: [f32; 10] = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+
+#[test]
+fn lift_success_near_miss_and_the_belt_term_dropped_past_x_2_2() {
+    // Robot target (2.0, 0) +- 0.05; success within 0.3 m. The belt term counts while base x < 2.2.
+    for (x, success, belt_term) in [(2.1, true, true), (2.4, false, false), (1.6, false, true)] {
+        let mut env = make(LIFT, None);
+        let target = env.app.world.resource::<TaskState>().targets[1];
+        set_base(&mut env, x, 0.0);
+        let o = env.step(&LIFT_HOLD);
+        let v = &o.info.values;
+        let belt = v["reward/belt_to_target"];
+        let d = (point(&env, "belt_mid") - env.app.world.resource::<TaskState>().targets[0]).norm();
+        println!(
+            "base x {x} (target x {:.3}): success {:?}, belt term {belt:.4} (-d = {:.4})",
+            target.x, o.info.success, -d
+        );
+        assert_eq!(o.info.success, Some(success));
+        assert_eq!(o.terminated, success);
+        if belt_term {
+            assert!((belt + d).abs() < 1e-9, "{belt} vs {}", -d);
+        } else {
+            assert_eq!(belt, 0.0);
+        }
+    }
+}
+
+#[test]
+fn lift_fails_when_the_belt_is_inside_the_body_box() {
+    // The scene's box (the Ridgeback's hull) does not hold the belt at the start; a box reaching
+    // up to the belt (x 0.5, z 0.55 in the base frame) does, and the first step ends the episode
+    // as a failure.
+    for (max, inside) in [("max: (0.5, 0.415, 0.33)", false), ("max: (0.6, 0.415, 0.6)", true)] {
+        let text = task_text("lift", "max: (0.5, 0.415, 0.33)", max);
+        let mut env = Env::new(task_app("lift", &text));
+        env.reset(Some(0));
+        let o = env.step(&LIFT_HOLD);
+        let t = o.info.values["termination/belt_on_body"];
+        println!("box {max}: belt_on_body {t}, terminated {}, success {:?}", o.terminated, o.info.success);
+        assert_eq!(t, f64::from(u8::from(inside)));
+        assert_eq!(o.terminated, inside);
+        assert_eq!(o.info.success, Some(false));
+    }
+}
+
+#[test]
+fn a_held_grasp_holds_the_belt_until_the_gripper_opens() {
+    // The belt's middle starts in the closed gripper at z 0.55; closed, it stays there; opened,
+    // the grasp releases and the middle sags (to about 0.4 m).
+    for (closed, expect_held) in [(1.0f32, true), (-1.0, false)] {
+        let mut env = make(LIFT, None);
+        let mut a = LIFT_HOLD;
+        a[9] = closed;
+        for _ in 0..90 {
+            let o = env.step(&a);
+            assert!(o.info.error.is_none(), "{:?}", o.info.error);
+        }
+        let z = point(&env, "belt_mid").z;
+        println!("gripper {closed}: belt middle at z {z:.3} after 1.5 s (held: above 0.5, released: below 0.47)");
+        if expect_held {
+            assert!(z > 0.5, "{z}");
+        } else {
+            assert!(z < 0.47, "{z}");
+        }
+    }
 }
 
 #[test]
@@ -416,7 +510,7 @@ fn every_implemented_environment_has_its_expert_tested() {
     for id in modesuite::tasks::IMPLEMENTED {
         let task = id.split('-').nth(2).unwrap();
         assert!(
-            ["Place", "Curtain", "Bend", "Transport", "Drag"].contains(&task),
+            ["Place", "Curtain", "Bend", "Transport", "Drag", "Lift"].contains(&task),
             "{id}: add an expert test for {task}"
         );
     }
@@ -445,6 +539,11 @@ fn transport_experts_succeed_on_several_seeds() {
 #[test]
 fn drag_experts_succeed_on_several_seeds() {
     task_experts("Drag");
+}
+
+#[test]
+fn lift_experts_succeed_on_several_seeds() {
+    task_experts("Lift");
 }
 
 fn expert_seeds(id: &str, seeds: &[u64]) {
@@ -514,6 +613,16 @@ fn task_section_errors_name_the_entry() {
         r#"points: {"g": Stages(stages: [Target("table")], by: Base, reach: 0.0)},"#,
     ));
     assert!(e.contains("reach"), "{e}");
+    // A held grasp needs a gripper that starts closed; the body box needs min below max.
+    let lift = |from: &str, to: &str| scene_error_in("lift", &task_text("lift", from, to));
+    let e = lift(", start_closed: true", "");
+    assert!(e.contains("held.grasp") && e.contains("start_closed"), "{e}");
+    let e = lift("min: (-0.5, -0.415, 0.0)", "min: (-0.5, -0.415, 0.4)");
+    assert!(e.contains("belt_on_body") && e.contains("min"), "{e}");
+    // Route legs need positive speeds.
+    let app = task_app("lift", &task_text("lift", "hand_speed: 0.105", "hand_speed: -0.1"));
+    let err = make_policy(PolicyKind::Scripted, &Env::new(app)).err().unwrap();
+    assert!(err.contains("route[4].hand_speed"), "{err}");
     // The route expert needs route legs.
     let app = place_app(&scene(r#"expert: "route","#));
     let env = Env::new(app);

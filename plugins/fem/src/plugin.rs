@@ -120,13 +120,7 @@ impl DeformableSolver for FemSolid {
         if nodes.is_empty() {
             return Ok(());
         }
-        // Stiff enough that the grasp, not the spring, limits what the gripper transmits: the
-        // whole grasp holds its force limit at 2 mm of stretch.
-        let stiffness = (force_limit.min(1e4) / (0.002 * nodes.len() as f64)).max(1e3);
-        let params = GraspParams {
-            stiffness,
-            force_limit,
-        };
+        let params = GraspParams::for_gripper(force_limit, nodes.len());
         self.grasp(body, *pose, &nodes, params)
             .map(|_| ())
             .map_err(|e| e.to_string())

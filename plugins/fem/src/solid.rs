@@ -191,6 +191,19 @@ pub struct GraspParams {
     pub force_limit: f64,
 }
 
+impl GraspParams {
+    /// A robot gripper's grasp of `nodes` nodes with force limit `force_limit` (N): stiff enough
+    /// that the grasp, not the spring, limits what the gripper transmits (the whole grasp holds
+    /// its force limit at 2 mm of stretch), at least 1e3 N/m per node.
+    pub fn for_gripper(force_limit: f64, nodes: usize) -> Self {
+        let stiffness = (force_limit.min(1e4) / (0.002 * nodes.max(1) as f64)).max(1e3);
+        Self {
+            stiffness,
+            force_limit,
+        }
+    }
+}
+
 /// What happened in a step or static solve. With `FemConfig::quasi_newton` a chord iteration
 /// counts as one Newton iteration and one linear iteration (one triangular solve pair).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -1851,14 +1864,22 @@ impl FemSolid {
         self.refresh_grasp_anchors();
         // contact candidates
         self.candidates.clear();
-        let full = self.full_constrained();
+        // Fully constrained nodes need no contact; grasped nodes are pinched between the fingers,
+        // whose contact the grasp spring stands for (a contact with the closing fingers would
+        // fight the spring).
+        let mut skip = self.full_constrained();
+        for g in &self.grasps {
+            for &n in &g.nodes {
+                skip[n as usize] = true;
+            }
+        }
         let mut normals = std::mem::take(&mut self.normals);
         self.model.surface_normals(&self.pos, &mut normals);
         self.normals = normals;
         let mut out: Vec<PointContact> = Vec::new();
         let gdt2 = gravity.norm() * dt * dt;
         for &i in &self.model.surface_nodes {
-            if full[i as usize] {
+            if skip[i as usize] {
                 continue;
             }
             let x = self.pos[i as usize];

@@ -107,6 +107,10 @@ pub struct RewardDesc {
     /// Multiply by the env step length, s (Isaac Lab's convention).
     #[serde(default)]
     pub dt_scaled: bool,
+    /// The reward counts only on steps where this term is non-zero (e.g. an `in_box` of the
+    /// base: a shaping term dropped once the robot is past a point); 0 on other steps.
+    #[serde(default)]
+    pub when: Option<TermDesc>,
 }
 
 /// One observation term of a group, with its post-processing (scale, then clip).
@@ -176,7 +180,7 @@ pub enum EventDesc {
 }
 
 /// A deformable held by the robot from the start: the selected nodes (object frame, at spawn)
-/// are attached kinematically to the body carrying the gripper (the precursor's rod in hand).
+/// are attached to the body carrying the gripper (the precursor's rod in hand).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HeldDesc {
@@ -184,6 +188,11 @@ pub struct HeldDesc {
     pub object: String,
     /// The held nodes.
     pub select: NodeSelect,
+    /// `false` (default): a kinematic attachment that never lets go. `true`: a grasp of the
+    /// robot's gripper (force-limited, the robot's `grasp_force_limit`), released when the
+    /// gripper opens; the robot must start with `start_closed: true`.
+    #[serde(default)]
+    pub grasp: bool,
 }
 
 /// One leg of the `route` expert: drive the base to a pose while the hand moves to a target.
@@ -201,6 +210,9 @@ pub struct RouteStep {
     /// Base speed limit on this leg, m/s (default 0.4).
     #[serde(default)]
     pub speed: Option<f64>,
+    /// Hand speed limit on this leg (its target's speed in the base frame), m/s (default 0.25).
+    #[serde(default)]
+    pub hand_speed: Option<f64>,
     /// The leg ends when the base is within this distance (m) of its goal and within 3 degrees
     /// of its heading, and the hand within 2 cm of its goal (default 0.05 m).
     #[serde(default)]

@@ -151,6 +151,19 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     if route.is_empty() {
                         return Err("the route expert needs the task's `route` legs".into());
                     }
+                    for (i, l) in route.iter().enumerate() {
+                        for (field, v) in [
+                            ("speed", l.speed),
+                            ("hand_speed", l.hand_speed),
+                            ("tolerance", l.tolerance),
+                        ] {
+                            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                                return Err(format!(
+                                    "task.route[{i}].{field} = {v}: a positive number (m/s or m)"
+                                ));
+                            }
+                        }
+                    }
                     check(route.iter().all(|l| l.hand.is_none()))?;
                     Ok(Box::new(RouteExpert {
                         robot,
@@ -323,7 +336,7 @@ impl Policy for CurtainExpert {
 
 /// Route: the task's `route` legs in order. On each leg the base is driven to its goal pose (a
 /// proportional controller on position and heading, speed-limited), the hand target moves to
-/// its goal (base frame) at up to 0.25 m/s, and the gripper is set; the leg ends when all are
+/// its goal (base frame) at up to the leg's hand speed (0.25 m/s by default), and the gripper is set; the leg ends when all are
 /// within tolerance. The last leg is held.
 struct RouteExpert {
     robot: String,
@@ -375,7 +388,7 @@ impl Policy for RouteExpert {
         let ee = match hand_goal {
             Some(h) => {
                 let d = h - cur;
-                let max = 0.25 * dt;
+                let max = leg.hand_speed.unwrap_or(0.25) * dt;
                 if d.norm() > max {
                     cur + d * (max / d.norm())
                 } else {

@@ -45,7 +45,7 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 10] = [
+pub const IMPLEMENTED: [&str; 12] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
@@ -56,6 +56,8 @@ pub const IMPLEMENTED: [&str; 10] = [
     "MoDe-Spot-Transport-v0",
     "MoDe-Franka-Drag-v0",
     "MoDe-Spot-Drag-v0",
+    "MoDe-Franka-Lift-v0",
+    "MoDe-Spot-Lift-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -134,6 +136,18 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "drag/spot.scene.ron",
         include_str!("../../../scenes/drag/spot.scene.ron"),
+    ),
+    (
+        "lift/lift.task.ron",
+        include_str!("../../../scenes/lift/lift.task.ron"),
+    ),
+    (
+        "lift/franka.scene.ron",
+        include_str!("../../../scenes/lift/franka.scene.ron"),
+    ),
+    (
+        "lift/spot.scene.ron",
+        include_str!("../../../scenes/lift/spot.scene.ron"),
     ),
     (
         "place/place.task.ron",

@@ -28,7 +28,7 @@ use modesuite_engine::{
     EngineSystems, EnvSystems, RigidContext, SimApp, SimClock, SimErrors, SimSettings, Space,
     Spaces,
 };
-use modesuite_fem::FemContext;
+use modesuite_fem::{FemContext, GraspParams};
 use modesuite_pbd::{Cloth, PbdContext};
 use modesuite_robots::{RobotObservation, Robots};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
@@ -54,6 +54,8 @@ pub struct RewardTerm {
     pub weight: f64,
     /// Multiplied by the env step length.
     pub dt_scaled: bool,
+    /// Counted only on steps where this term is non-zero.
+    pub when: Option<NamedTerm>,
 }
 
 /// An observation term with post-processing.
@@ -373,6 +375,19 @@ impl SceneSection for TaskSection {
                 &r.term,
                 r.params.as_deref(),
             )?;
+            let when = match &r.when {
+                Some(t) => Some(NamedTerm {
+                    name: format!("{n}.when"),
+                    term: configure(
+                        ctx,
+                        &mut cfg,
+                        format!("{path}.rewards[\"{n}\"].when"),
+                        &t.term,
+                        t.params.as_deref(),
+                    )?,
+                }),
+                None => None,
+            };
             rewards.push(RewardTerm {
                 term: NamedTerm {
                     name: n.clone(),
@@ -380,6 +395,7 @@ impl SceneSection for TaskSection {
                 },
                 weight: r.weight,
                 dt_scaled: r.dt_scaled,
+                when,
             });
         }
         let named = |section: &str,
@@ -670,10 +686,21 @@ impl SceneSection for TaskSection {
             let (e, l) = local(&h.object)?;
             let nodes = h.select.select(&hpath, &l)?;
             let robots = app.world.resource::<Robots>();
-            let body = robots
+            let rt = robots
                 .get(&model.robot)
-                .map(|r| r.fixed.gripper_body_id)
                 .ok_or_else(|| serr(&hpath, model.robot.clone(), "a robot"))?;
+            let body = rt.fixed.gripper_body_id;
+            let force_limit = rt.fixed.grasp_force_limit;
+            if h.grasp && !rt.gripper_closed {
+                return Err(serr(
+                    &format!("{hpath}.grasp"),
+                    "true",
+                    format!(
+                        "a robot whose gripper starts closed (robot \"{}\": start_closed: true); an open gripper releases the grasp at the first step",
+                        model.robot
+                    ),
+                ));
+            }
             let pose = app
                 .world
                 .resource::<RigidContext>()
@@ -690,9 +717,13 @@ impl SceneSection for TaskSection {
                     "a fem.solid object",
                 )
             })?;
-            solid
-                .attach_to_body(body, pose, &nodes)
-                .map_err(|er| serr(&hpath, format!("{} nodes", nodes.len()), er.to_string()))?;
+            let held = if h.grasp {
+                let params = GraspParams::for_gripper(force_limit, nodes.len());
+                solid.grasp(body, pose, &nodes, params)
+            } else {
+                solid.attach_to_body(body, pose, &nodes)
+            };
+            held.map_err(|er| serr(&hpath, format!("{} nodes", nodes.len()), er.to_string()))?;
         }
         let stage_slots = n_stages(&points);
         let task = Task {
@@ -921,6 +952,12 @@ fn task_evaluate(
     let result = tw.with_ctx(|task, ctx| -> Result<(), String> {
         let (m, dims) = (&task.model, task.dims);
         for r in &m.rewards {
+            if let Some(w) = &r.when {
+                if eval(w, ctx, &dims, "reward")?[0] == 0.0 {
+                    signals.add_reward(&r.term.name, 0.0);
+                    continue;
+                }
+            }
             let v = eval(&r.term, ctx, &dims, "reward")?[0];
             let w = r.weight * if r.dt_scaled { step_dt } else { 1.0 };
             signals.add_reward(&r.term.name, w * v);

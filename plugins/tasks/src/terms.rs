@@ -324,6 +324,36 @@ fn within_term(
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
+struct ObjectInBaseBoxParams {
+    object: String,
+    min: (f64, f64, f64),
+    max: (f64, f64, f64),
+}
+
+/// The corners of a box, checked: `min` below `max` on every axis.
+fn box_bounds(
+    min: (f64, f64, f64),
+    max: (f64, f64, f64),
+) -> Result<(Vector3<f64>, Vector3<f64>), String> {
+    let (lo, hi) = (
+        Vector3::new(min.0, min.1, min.2),
+        Vector3::new(max.0, max.1, max.2),
+    );
+    if (0..3).any(|i| lo[i].partial_cmp(&hi[i]) != Some(std::cmp::Ordering::Less)) {
+        return Err(format!(
+            "min {min:?} must be below max {max:?} on every axis"
+        ));
+    }
+    Ok((lo, hi))
+}
+
+/// Whether `d` lies strictly inside the box `[lo, hi]`.
+fn inside(d: &Vector3<f64>, lo: &Vector3<f64>, hi: &Vector3<f64>) -> bool {
+    (0..3).all(|i| d[i] > lo[i] && d[i] < hi[i])
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct InBoxParams {
     point: PointRef,
     center: PointRef,
@@ -482,19 +512,38 @@ pub fn register_library(app: &mut SimApp) {
         "1 when point - center lies in [min, max] (axis-aligned, m), else 0",
         factory(|p: InBoxParams, cfg| {
             let (a, c0) = (cfg.point(&p.point)?, cfg.point(&p.center)?);
-            let (lo, hi) = (
-                Vector3::new(p.min.0, p.min.1, p.min.2),
-                Vector3::new(p.max.0, p.max.1, p.max.2),
-            );
-            if (0..3).any(|i| lo[i].partial_cmp(&hi[i]) != Some(std::cmp::Ordering::Less)) {
-                return Err(format!(
-                    "min {:?} must be below max {:?} on every axis",
-                    p.min, p.max
-                ));
-            }
+            let (lo, hi) = box_bounds(p.min, p.max)?;
             Ok(term(1, move |c, out| {
-                let d = c.point(a) - c.point(c0);
-                out[0] = f64::from((0..3).all(|i| d[i] > lo[i] && d[i] < hi[i]));
+                out[0] = f64::from(inside(&(c.point(a) - c.point(c0)), &lo, &hi));
+                Ok(())
+            }))
+        }),
+    );
+    reg(
+        app,
+        "object_in_base_box",
+        Termination,
+        "1 when any node of a deformable object lies in the box [min, max] of the robot's base frame (m; e.g. the body's hull: a collision of the body with a belt), else 0",
+        factory(|p: ObjectInBaseBoxParams, cfg| {
+            cfg.object(&p.object)?;
+            let (lo, hi) = box_bounds(p.min, p.max)?;
+            Ok(term(1, move |c, out| {
+                let o = c
+                    .world
+                    .object(&p.object)
+                    .ok_or_else(|| format!("object \"{}\" is not in the scene", p.object))?;
+                if o.nodes.is_empty() {
+                    return Err(format!(
+                        "object \"{}\" has no nodes (object_in_base_box needs a deformable)",
+                        p.object
+                    ));
+                }
+                let inv = c.robot.base.inverse();
+                out[0] = f64::from(
+                    o.nodes
+                        .iter()
+                        .any(|n| inside(&inv.transform_point(&(*n).into()).coords, &lo, &hi)),
+                );
                 Ok(())
             }))
         }),
