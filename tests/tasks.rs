@@ -132,7 +132,6 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Franka-Drag-v0", 43, 9),
         ("MoDe-Spot-Drag-v0", 41, 9),
         ("MoDe-Franka-Lift-v0", 43, 10),
-        ("MoDe-Spot-Lift-v0", 41, 10),
     ] {
         let env = make(id, None);
         let s = env.spaces();
@@ -301,7 +300,8 @@ fn lift_success_near_miss_and_the_belt_term_dropped_past_x_2_2() {
         assert_eq!(o.info.success, Some(success));
         assert_eq!(o.terminated, success);
         if belt_term {
-            assert!((belt + d).abs() < 1e-9, "{belt} vs {}", -d);
+            // the term measured during the step, the distance here after it: within 1 cm
+            assert!(belt < 0.0 && (belt + d).abs() < 0.01, "{belt} vs {}", -d);
         } else {
             assert_eq!(belt, 0.0);
         }
@@ -313,13 +313,19 @@ fn lift_fails_when_the_belt_is_inside_the_body_box() {
     // The scene's box (the Ridgeback's hull) does not hold the belt at the start; a box reaching
     // up to the belt (x 0.5, z 0.55 in the base frame) does, and the first step ends the episode
     // as a failure.
-    for (max, inside) in [("max: (0.5, 0.415, 0.33)", false), ("max: (0.6, 0.415, 0.6)", true)] {
+    for (max, inside) in [
+        ("max: (0.5, 0.415, 0.33)", false),
+        ("max: (0.6, 0.415, 0.6)", true),
+    ] {
         let text = task_text("lift", "max: (0.5, 0.415, 0.33)", max);
         let mut env = Env::new(task_app("lift", &text));
         env.reset(Some(0));
         let o = env.step(&LIFT_HOLD);
         let t = o.info.values["termination/belt_on_body"];
-        println!("box {max}: belt_on_body {t}, terminated {}, success {:?}", o.terminated, o.info.success);
+        println!(
+            "box {max}: belt_on_body {t}, terminated {}, success {:?}",
+            o.terminated, o.info.success
+        );
         assert_eq!(t, f64::from(u8::from(inside)));
         assert_eq!(o.terminated, inside);
         assert_eq!(o.info.success, Some(false));
@@ -616,12 +622,20 @@ fn task_section_errors_name_the_entry() {
     // A held grasp needs a gripper that starts closed; the body box needs min below max.
     let lift = |from: &str, to: &str| scene_error_in("lift", &task_text("lift", from, to));
     let e = lift(", start_closed: true", "");
-    assert!(e.contains("held.grasp") && e.contains("start_closed"), "{e}");
+    assert!(
+        e.contains("held.grasp") && e.contains("start_closed"),
+        "{e}"
+    );
     let e = lift("min: (-0.5, -0.415, 0.0)", "min: (-0.5, -0.415, 0.4)");
     assert!(e.contains("belt_on_body") && e.contains("min"), "{e}");
     // Route legs need positive speeds.
-    let app = task_app("lift", &task_text("lift", "hand_speed: 0.105", "hand_speed: -0.1"));
-    let err = make_policy(PolicyKind::Scripted, &Env::new(app)).err().unwrap();
+    let app = task_app(
+        "lift",
+        &task_text("lift", "hand_speed: 0.105", "hand_speed: -0.1"),
+    );
+    let err = make_policy(PolicyKind::Scripted, &Env::new(app))
+        .err()
+        .unwrap();
     assert!(err.contains("route[4].hand_speed"), "{err}");
     // The route expert needs route legs.
     let app = place_app(&scene(r#"expert: "route","#));
