@@ -142,6 +142,10 @@ struct Attachment {
     lambda: Vec<Vector3<f64>>,
     /// Scratch for candidate multipliers.
     cand: Vec<Vector3<f64>>,
+    /// Multiplier sum of the tethers anchored at this (force-limited) attachment in the current
+    /// substep (scratch), kg m: the tethers' pull counts against the force limit and is part of
+    /// the reported impulse.
+    tether_lambda: Vector3<f64>,
 }
 
 /// An XPBD cloth (or rope) with all solver state in flat arrays.
@@ -210,6 +214,14 @@ pub struct Cloth {
     /// Tethers as compact rows (particle, its nearest kinematic particle, maximal distance to
     /// it m), in particle order.
     tether_rows: Vec<(u32, u32, f64)>,
+    /// Tethers anchored at grasped (force-limited) particles, along the shortest-path tree:
+    /// (particle, its parent on the path to the grasp, maximal distance to it m (the edge's rest
+    /// length), attachment index), parents before children.
+    grasp_tether_rows: Vec<(u32, u32, f64, u32)>,
+    /// Scratch: the corrections of the grasp tethers in the current iteration, m, and their
+    /// summed multipliers per attachment, kg m.
+    tether_dx: Vec<Vector3<f64>>,
+    tether_j: Vec<Vector3<f64>>,
     /// `(n)` particle adjacency (CSR over mesh edges / distance constraints) for tethers.
     adj_start: Vec<u32>,
     adj: Vec<(u32, f64)>,
@@ -493,6 +505,9 @@ impl Cloth {
             bend_rows: Vec::new(),
             cache_h: f64::NAN,
             tether_rows: Vec::new(),
+            grasp_tether_rows: Vec::new(),
+            tether_dx: Vec::new(),
+            tether_j: Vec::new(),
             adj_start,
             adj,
             frames: Vec::new(),
@@ -737,6 +752,7 @@ impl Cloth {
             impulse: Vector3::zeros(),
             lambda: vec![Vector3::zeros(); k],
             cand: vec![Vector3::zeros(); k],
+            tether_lambda: Vector3::zeros(),
         });
         self.refresh_inv_mass();
         self.rebuild_tethers();
@@ -1031,11 +1047,13 @@ impl Cloth {
         }
     }
 
-    /// Long-range attachments: each particle is tethered to its nearest pinned particle
+    /// Long-range attachments: each particle is tethered to its nearest anchor: a pinned
+    /// (kinematic) particle, and with [`SolverSettings::grasp_tethers`] a grasped one too
     /// (multi-source Dijkstra over the edge graph, deterministic tie-breaking by index).
     fn rebuild_tethers(&mut self) {
         let n = self.pos.len();
         self.tether_rows.clear();
+        self.grasp_tether_rows.clear();
         if !self.settings.tethers {
             return;
         }
@@ -1057,25 +1075,51 @@ impl Cloth {
         }
         let mut dist = vec![f64::INFINITY; n];
         let mut anchor = vec![u32::MAX; n];
+        // predecessor on the shortest path and the rest length of that edge
+        let mut parent = vec![(u32::MAX, 0.0); n];
+        // The attachment each anchor belongs to (u32::MAX: a kinematic pin). Pins win over
+        // grasps for a particle in both; among grasps the first in creation order wins.
+        let mut owner = vec![u32::MAX; n];
+        let mut is_source = vec![false; n];
         let mut heap = BinaryHeap::new();
-        // only kinematic attachments anchor tethers: a force-limited attachment must feel the
-        // cloth's load through the constraints, not through rigid tether jumps
-        let mut sources: Vec<u32> = self
-            .attachments
-            .iter()
-            .filter(|a| a.kinematic)
-            .flat_map(|a| a.particles.iter().copied())
-            .collect();
-        sources.sort_unstable();
-        sources.dedup();
-        for &s in &sources {
-            dist[s as usize] = 0.0;
-            anchor[s as usize] = s;
-            heap.push(Item(0.0, s, s));
+        for a in self.attachments.iter().filter(|a| a.kinematic) {
+            for &p in &a.particles {
+                is_source[p as usize] = true;
+            }
+        }
+        if self.settings.grasp_tethers {
+            for (k, a) in self.attachments.iter().enumerate() {
+                if a.kinematic || a.frame.is_none() {
+                    continue;
+                }
+                for &p in &a.particles {
+                    if !is_source[p as usize] {
+                        is_source[p as usize] = true;
+                        owner[p as usize] = k as u32;
+                    }
+                }
+            }
+        }
+        for s in 0..n {
+            if is_source[s] {
+                dist[s] = 0.0;
+                anchor[s] = s as u32;
+                heap.push(Item(0.0, s as u32, s as u32));
+            }
         }
         while let Some(Item(d, p, a)) = heap.pop() {
             if d > dist[p as usize] || (d == dist[p as usize] && a != anchor[p as usize]) {
                 continue;
+            }
+            // grasp-anchored particles in the order they are settled (parents first)
+            let (par, len) = parent[p as usize];
+            if par != u32::MAX && owner[a as usize] != u32::MAX {
+                self.grasp_tether_rows.push((
+                    p,
+                    par,
+                    len * (1.0 + self.settings.grasp_tether_slack),
+                    owner[a as usize],
+                ));
             }
             let (s, e) = (
                 self.adj_start[p as usize] as usize,
@@ -1087,6 +1131,7 @@ impl Cloth {
                 if nd < dist[qi] || (nd == dist[qi] && a < anchor[qi]) {
                     dist[qi] = nd;
                     anchor[qi] = a;
+                    parent[qi] = (p, l);
                     heap.push(Item(nd, q, a));
                 }
             }
@@ -1100,7 +1145,9 @@ impl Cloth {
                 TetherMetric::Graph => dist[i],
                 TetherMetric::RestEuclidean => (self.rest[i] - self.rest[a]).norm(),
             };
-            self.tether_rows.push((i as u32, a as u32, len));
+            if owner[a] == u32::MAX {
+                self.tether_rows.push((i as u32, a as u32, len));
+            }
         }
     }
 
@@ -1431,6 +1478,7 @@ impl Cloth {
             self.c_dn.iter_mut().for_each(|d| *d = 0.0);
             for a in &mut self.attachments {
                 a.lambda.iter_mut().for_each(|l| *l = Vector3::zeros());
+                a.tether_lambda = Vector3::zeros();
             }
             for _ in 0..self.settings.iterations {
                 if self.settings.iterations == 1 {
@@ -1459,12 +1507,20 @@ impl Cloth {
             self.apply_friction(h);
             // friction of one contact may push a particle into another contact's plane
             self.reproject_contacts(t_end, half, h);
+            if !self.grasp_tether_rows.is_empty() {
+                // after friction, so that a tether pulling a particle into a collider (cloth
+                // hanging over a table's far edge, pulled from the near one) does not make a
+                // normal correction that friction then turns into a lock; the contacts are
+                // projected once more (normal only)
+                self.solve_grasp_tethers(h);
+                self.reproject_contacts(t_end, half, h);
+            }
             // slip: re-anchor attachments that hit their limit at the positions they reached
             for a in &mut self.attachments {
                 if a.kinematic {
                     continue;
                 }
-                let total: Vector3<f64> = a.lambda.iter().sum();
+                let total: Vector3<f64> = a.lambda.iter().sum::<Vector3<f64>>() + a.tether_lambda;
                 a.impulse += total / h;
                 if total.norm() * inv_h2 >= a.max_force * (1.0 - 1e-12) {
                     a.slipped = true;
@@ -1538,6 +1594,57 @@ impl Cloth {
             let c = (l - len).max(0.0);
             let s = if c > 0.0 { c / l } else { 0.0 };
             pos[i as usize] -= d * s;
+        }
+    }
+
+    /// Tethers anchored at grasped particles ([`SolverSettings::grasp_tethers`]), "follow the
+    /// leader" along the shortest-path tree from the grasp (Müller, Kim, Chentanez, "Fast
+    /// simulation of inextensible hair and fur", 2012): in tree order (parents first) a particle
+    /// farther from its parent than their edge's rest length times
+    /// `1 + SolverSettings::grasp_tether_slack` is moved back onto that sphere; the parent is not
+    /// moved (the slack keeps the sweep off in the cloth's ordinary slightly stretched state:
+    /// with none, it pulled the whole sheet towards the grasp by the sum of the edges' small
+    /// stretches at every substep, and the sheet flew off the table). One sweep carries a pull across the whole sheet, and, unlike
+    /// straight-line tethers, along the cloth around a table's edge (a straight tether pressed
+    /// the particles hanging over the far edge into the table's side, where friction held
+    /// them). The pull of one grasp's rows, `sum m_i dx_i`, is added to the grasp's multipliers
+    /// and shares its force limit: when the grasp's attachment and tether multipliers together
+    /// exceed the limit, this sweep's corrections of that grasp are scaled down to fit (the grasp
+    /// then slips at the end of the substep, as without tethers).
+    fn solve_grasp_tethers(&mut self, h: f64) {
+        if self.grasp_tether_rows.is_empty() {
+            return;
+        }
+        let na = self.attachments.len();
+        self.tether_j.clear();
+        self.tether_j.resize(na, Vector3::zeros());
+        self.tether_dx.clear();
+        for &(i, par, len, k) in &self.grasp_tether_rows {
+            let d = self.pos[i as usize] - self.pos[par as usize];
+            let l = d.norm();
+            let c = (l - len).max(0.0);
+            let dx = if c > 0.0 { -d * (c / l) } else { Vector3::zeros() };
+            self.pos[i as usize] += dx;
+            self.tether_j[k as usize] += dx * self.mass[i as usize];
+            self.tether_dx.push(dx);
+        }
+        for (k, a) in self.attachments.iter_mut().enumerate() {
+            let j = self.tether_j[k];
+            let lim = a.max_force * h * h;
+            let used = a.lambda.iter().sum::<Vector3<f64>>() + a.tether_lambda;
+            let scale = if (used + j).norm() <= lim || j == Vector3::zeros() {
+                1.0
+            } else {
+                ((lim - used.norm()) / j.norm()).clamp(0.0, 1.0)
+            };
+            a.tether_lambda += j * scale;
+            if scale < 1.0 {
+                for (r, dx) in self.grasp_tether_rows.iter().zip(&self.tether_dx) {
+                    if r.3 as usize == k {
+                        self.pos[r.0 as usize] -= dx * (1.0 - scale);
+                    }
+                }
+            }
         }
     }
 
@@ -1843,6 +1950,7 @@ impl Cloth {
                 impulse,
                 lambda: vec![Vector3::zeros(); k],
                 cand: vec![Vector3::zeros(); k],
+                tether_lambda: Vector3::zeros(),
             });
         }
         if r.k != state.len() {
