@@ -222,6 +222,8 @@ pub struct Cloth {
     /// summed multipliers per attachment, kg m.
     tether_dx: Vec<Vector3<f64>>,
     tether_j: Vec<Vector3<f64>>,
+    /// Scratch: the positions of the grasp tethers' particles after their sweep, m.
+    tether_pos: Vec<Vector3<f64>>,
     /// `(n)` particle adjacency (CSR over mesh edges / distance constraints) for tethers.
     adj_start: Vec<u32>,
     adj: Vec<(u32, f64)>,
@@ -508,6 +510,7 @@ impl Cloth {
             grasp_tether_rows: Vec::new(),
             tether_dx: Vec::new(),
             tether_j: Vec::new(),
+            tether_pos: Vec::new(),
             adj_start,
             adj,
             frames: Vec::new(),
@@ -1514,6 +1517,7 @@ impl Cloth {
                 // projected once more (normal only)
                 self.solve_grasp_tethers(h);
                 self.reproject_contacts(t_end, half, h);
+                self.grasp_tether_contact_share();
             }
             // slip: re-anchor attachments that hit their limit at the positions they reached
             for a in &mut self.attachments {
@@ -1630,9 +1634,12 @@ impl Cloth {
         }
         for (k, a) in self.attachments.iter_mut().enumerate() {
             let j = self.tether_j[k];
+            if j == Vector3::zeros() {
+                continue;
+            }
             let lim = a.max_force * h * h;
             let used = a.lambda.iter().sum::<Vector3<f64>>() + a.tether_lambda;
-            let scale = if (used + j).norm() <= lim || j == Vector3::zeros() {
+            let scale = if (used + j).norm() <= lim {
                 1.0
             } else {
                 ((lim - used.norm()) / j.norm()).clamp(0.0, 1.0)
@@ -1644,6 +1651,23 @@ impl Cloth {
                         self.pos[r.0 as usize] -= dx * (1.0 - scale);
                     }
                 }
+            }
+        }
+        self.tether_pos.clear();
+        for r in &self.grasp_tether_rows {
+            self.tether_pos.push(self.pos[r.0 as usize]);
+        }
+    }
+
+    /// What the contacts took back of the grasp tethers' corrections (a particle pulled into a
+    /// collider and pushed out again) is borne by the collider, not the grasp: it is removed
+    /// from the grasps' tether multipliers (otherwise a cloth held back by a table pulled the
+    /// robot towards the table with the grasp's whole force limit).
+    fn grasp_tether_contact_share(&mut self) {
+        for (r, after) in self.grasp_tether_rows.iter().zip(&self.tether_pos) {
+            let back = self.pos[r.0 as usize] - after;
+            if back != Vector3::zeros() {
+                self.attachments[r.3 as usize].tether_lambda += back * self.mass[r.0 as usize];
             }
         }
     }
