@@ -134,12 +134,13 @@ pub struct SolverSettings {
     /// Rest distance measure for tethers.
     pub tether_metric: TetherMetric,
     /// Tethers are also anchored at grasped particles (force-limited attachments on a frame):
-    /// every particle nearer (along the rest mesh) to a grasped particle than to a pin may not be
-    /// farther from it than their rest distance. The tethers' pull counts against the grasp's
-    /// force limit and is reported with the grasp's reaction. Without them a few grasped
-    /// particles drag a large sheet only through the distance constraints, which one
+    /// every particle nearer (along the rest mesh) to a grasped particle than to a pin is kept,
+    /// edge by edge along its shortest path to the grasp, within `1 + grasp_tether_slack` times
+    /// the path's rest length ("follow the leader", see `Cloth::step`). Without them a few
+    /// grasped particles drag a large sheet only through the distance constraints, which one
     /// Gauss-Seidel iteration per substep carries a few particles per substep, so the sheet
-    /// stretches into a strand (needs `tethers`).
+    /// stretches into a strand. The sweep limits stretch only: its corrections are not part of
+    /// the grasp's reaction or force limit. Needs `tethers`.
     pub grasp_tethers: bool,
     /// Strain a grasp tether allows before it acts (fraction of the edge's rest length, >= 0).
     pub grasp_tether_slack: f64,
