@@ -109,6 +109,8 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Spot-Transport-v0", 41, 9),
         ("MoDe-Franka-Drag-v0", 43, 9),
         ("MoDe-Spot-Drag-v0", 41, 9),
+        ("MoDe-Franka-Uncover-v0", 46, 10),
+        ("MoDe-Spot-Uncover-v0", 44, 10),
     ] {
         let env = make(id, None);
         let s = env.spaces();
@@ -416,7 +418,7 @@ fn every_implemented_environment_has_its_expert_tested() {
     for id in modesuite::tasks::IMPLEMENTED {
         let task = id.split('-').nth(2).unwrap();
         assert!(
-            ["Place", "Curtain", "Bend", "Transport", "Drag"].contains(&task),
+            ["Place", "Curtain", "Bend", "Transport", "Drag", "Uncover"].contains(&task),
             "{id}: add an expert test for {task}"
         );
     }
@@ -445,6 +447,11 @@ fn transport_experts_succeed_on_several_seeds() {
 #[test]
 fn drag_experts_succeed_on_several_seeds() {
     task_experts("Drag");
+}
+
+#[test]
+fn uncover_experts_succeed_on_several_seeds() {
+    task_experts("Uncover");
 }
 
 fn expert_seeds(id: &str, seeds: &[u64]) {

@@ -446,7 +446,6 @@ impl Policy for RouteExpert {
             }
             (_, h) => h,
         };
-        let hand_err = hand_goal.map_or(0.0, |h| (h - cur).norm());
         let rot_reached = rot.is_none_or(|g| g.angle_to(&rt.ee_target.rotation) < 0.05);
         let tol = leg.tolerance.unwrap_or(0.05);
         if err.norm() < tol
@@ -457,20 +456,6 @@ impl Policy for RouteExpert {
         {
             self.leg += 1;
             self.bias = Vector3::zeros();
-        }
-        if std::env::var_os("MODESUITE_ROUTE_DEBUG").is_some() {
-            eprintln!(
-                "leg {} touch {:?} rpy {:?} goal {:?} base ({:.3}, {:.3}) err {:.3} hand_err {:.3} tcp {:?}",
-                self.leg,
-                obs.touching,
-                rt.ee_target.rotation.euler_angles(),
-                hand_goal.map(|h| obs.base.transform_point(&h.into()).coords),
-                b.x,
-                b.y,
-                err.norm(),
-                hand_err,
-                obs.ee.translation.vector.as_slice()
-            );
         }
         let speed = leg.speed.unwrap_or(0.4);
         let mut v = 1.5 * err;
