@@ -140,7 +140,9 @@ pub struct SolverSettings {
     /// grasped particles drag a large sheet only through the distance constraints, which one
     /// Gauss-Seidel iteration per substep carries a few particles per substep, so the sheet
     /// stretches into a strand. The sweep limits stretch only: its corrections are not part of
-    /// the grasp's reaction or force limit. Needs `tethers`.
+    /// the grasp's reaction or force limit, so they are off by default (with them, the grip
+    /// force of a hanging grasped sheet read below its weight); scenes that drag large sheets
+    /// turn them on (`grasp_tethers: true`). Needs `tethers`.
     pub grasp_tethers: bool,
     /// Strain a grasp tether allows before it acts (fraction of the edge's rest length, >= 0).
     pub grasp_tether_slack: f64,
@@ -166,7 +168,7 @@ impl Default for SolverSettings {
             self_collision_margin: 0.01,
             tethers: true,
             tether_metric: TetherMetric::Graph,
-            grasp_tethers: true,
+            grasp_tethers: false,
             grasp_tether_slack: 0.05,
             contact_margin: 0.01,
             attachment_compliance: 0.0,

@@ -68,7 +68,7 @@ pub struct ClothParams {
     /// Self-collision on or off (default off).
     #[serde(default)]
     pub self_collision: Option<bool>,
-    /// Tethers anchored at grasped particles too (default on, see
+    /// Tethers anchored at grasped particles too (default off, see
     /// [`SolverSettings::grasp_tethers`]).
     #[serde(default)]
     pub grasp_tethers: Option<bool>,
