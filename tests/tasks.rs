@@ -185,6 +185,50 @@ fn curtain_success_and_frame_contact_on_constructed_states() {
 }
 
 #[test]
+fn uncover_success_needs_the_table_cleared_and_the_handle_pulled_out() {
+    const UNCOVER: &str = "MoDe-Franka-Uncover-v0";
+    let zero = [0.0f32; 10];
+    // the cover is spawned flat at z 0.754 over x 1.0 .. 2.6, y -0.6 .. 0.6 (+- its offset);
+    // each case moves it rigidly by (dx, dy, dz)
+    for (d, success, cleared, out) in [
+        // on the table: neither
+        ((0.0, 0.0, 0.0), false, false, false),
+        // beside the table on the floor, handle at x ~ 0.0: success
+        ((-1.0, 1.5, -0.75), true, true, true),
+        // pulled 1.2 m: handle at x ~ -0.2 but 6 of 41 columns (10 %) still over the top
+        ((-1.2, 0.0, 0.0), false, false, true),
+        // beside the table on the floor, handle not pulled out (x ~ 1.0 > 0.9)
+        ((0.0, 1.5, -0.75), false, true, false),
+    ] {
+        let mut env = make(UNCOVER, None);
+        {
+            let mut ctx = env.app.world.resource_mut::<modesuite::pbd::PbdContext>();
+            let cloth = &mut ctx.bodies[0].solver;
+            let moved: Vec<_> = cloth
+                .positions()
+                .iter()
+                .map(|p| p + Vector3::new(d.0, d.1, d.2))
+                .collect();
+            cloth.set_positions(&moved).unwrap();
+        }
+        let o = env.step(&zero);
+        let v = &o.info.values;
+        println!(
+            "cover moved by {d:?}: success {:?}, uncovered {}, handle out {}, handle at {:?}",
+            o.info.success,
+            v["success/uncovered"],
+            v["success/handle_out"],
+            point(&env, "handle")
+        );
+        assert_eq!(v["success/uncovered"] != 0.0, cleared, "{d:?}");
+        assert_eq!(v["success/handle_out"] != 0.0, out, "{d:?}");
+        assert_eq!(o.info.success, Some(success));
+        assert_eq!(o.terminated, success);
+        assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
+    }
+}
+
+#[test]
 fn transport_goal_moves_from_t1_to_t2_once_the_base_reaches_t1() {
     let mut env = make("MoDe-Franka-Transport-v0", None);
     let zero = [0.0f32; 9];
