@@ -132,6 +132,8 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Franka-Drag-v0", 43, 9),
         ("MoDe-Spot-Drag-v0", 41, 9),
         ("MoDe-Franka-Lift-v0", 43, 10),
+        ("MoDe-Franka-Uncover-v0", 46, 10),
+        ("MoDe-Spot-Uncover-v0", 44, 10),
     ] {
         let env = make(id, None);
         let s = env.spaces();
@@ -201,6 +203,47 @@ fn curtain_success_and_frame_contact_on_constructed_states() {
         assert_eq!(o.info.success, Some(success));
         assert_eq!(contact != 0.0, touched);
         assert_eq!(o.terminated, success || touched);
+        assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
+    }
+}
+
+#[test]
+fn uncover_success_needs_the_table_cleared_and_the_handle_pulled_out() {
+    const UNCOVER: &str = "MoDe-Franka-Uncover-v0";
+    let zero = [0.0f32; 10];
+    // the cover is spawned flat at z 0.754 over x 1.0 .. 2.6, y -0.6 .. 0.6 (+- its offset);
+    // each case moves it rigidly by (dx, dy, dz)
+    for (d, success, cleared, out) in [
+        // on the table: neither
+        ((0.0, 0.0, 0.0), false, false, false),
+        // beside the table on the floor, handle at x ~ 0.0: success
+        ((-1.0, 1.5, -0.75), true, true, true),
+        // pulled 1.2 m: handle at x ~ -0.2 but 6 of 41 columns (10 %) still over the top
+        ((-1.2, 0.0, 0.0), false, false, true),
+        // beside the table on the floor, handle not pulled out (x ~ 1.0 > 0.9)
+        ((0.0, 1.5, -0.75), false, true, false),
+    ] {
+        let mut env = make(UNCOVER, None);
+        {
+            let mut ctx = env.app.world.resource_mut::<modesuite::pbd::PbdContext>();
+            let cloth = &mut ctx.bodies[0].solver;
+            let moved: Vec<_> = cloth
+                .positions()
+                .iter()
+                .map(|p| p + Vector3::new(d.0, d.1, d.2))
+                .collect();
+            cloth.set_positions(&moved).unwrap();
+        }
+        let o = env.step(&zero);
+        let v = &o.info.values;
+        println!(
+            "cover moved by {d:?}: success {:?}, uncovered {}, handle out {}",
+            o.info.success, v["success/uncovered"], v["success/handle_out"]
+        );
+        assert_eq!(v["success/uncovered"] != 0.0, cleared, "{d:?}");
+        assert_eq!(v["success/handle_out"] != 0.0, out, "{d:?}");
+        assert_eq!(o.info.success, Some(success));
+        assert_eq!(o.terminated, success);
         assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
     }
 }
@@ -516,7 +559,7 @@ fn every_implemented_environment_has_its_expert_tested() {
     for id in modesuite::tasks::IMPLEMENTED {
         let task = id.split('-').nth(2).unwrap();
         assert!(
-            ["Place", "Curtain", "Bend", "Transport", "Drag", "Lift"].contains(&task),
+            ["Place", "Curtain", "Bend", "Transport", "Drag", "Lift", "Uncover"].contains(&task),
             "{id}: add an expert test for {task}"
         );
     }
@@ -550,6 +593,11 @@ fn drag_experts_succeed_on_several_seeds() {
 #[test]
 fn lift_experts_succeed_on_several_seeds() {
     task_experts("Lift");
+}
+
+#[test]
+fn uncover_experts_succeed_on_several_seeds() {
+    task_experts("Uncover");
 }
 
 fn expert_seeds(id: &str, seeds: &[u64]) {

@@ -38,8 +38,13 @@
 //!   processed four at a time. Under-iterated XPBD is always softer than converged, never
 //!   stiffer (tested). Stiff bending needs many more substeps to converge (the drape test uses
 //!   80 per frame).
-//! * **Tethers only from kinematic pins**: a force-limited attachment must feel the cloth's load
-//!   through the constraints; tethers to it made the grip force wrong (measured).
+//! * **Straight tethers only from kinematic pins**: a force-limited attachment must feel the
+//!   cloth's load through the constraints; tethers to it made the grip force wrong (measured).
+//!   Grasps may instead anchor *grasp tethers* (`SolverSettings::grasp_tethers`, off by
+//!   default): a follow-the-leader sweep along the shortest-path tree from the grasp that limits
+//!   stretch only (5 % slack per edge) and is not part of the grasp's reaction or force limit;
+//!   it lets three grasped particles drag a 41 x 31 table cover off a table (see
+//!   ARCHITECTURE.md, "Grasp tethers", for the measured alternatives).
 //! * **Contacts are queried once per step** (one `contacts_near` call per particle), plus a
 //!   guard: a particle that constraint corrections carry farther than its query radius is
 //!   queried again within the step. Without the guard, one particle of the reference sheet

@@ -133,6 +133,19 @@ pub struct SolverSettings {
     pub tethers: bool,
     /// Rest distance measure for tethers.
     pub tether_metric: TetherMetric,
+    /// Tethers are also anchored at grasped particles (force-limited attachments on a frame):
+    /// every particle nearer (along the rest mesh) to a grasped particle than to a pin is kept,
+    /// edge by edge along its shortest path to the grasp, within `1 + grasp_tether_slack` times
+    /// the path's rest length ("follow the leader", see `Cloth::step`). Without them a few
+    /// grasped particles drag a large sheet only through the distance constraints, which one
+    /// Gauss-Seidel iteration per substep carries a few particles per substep, so the sheet
+    /// stretches into a strand. The sweep limits stretch only: its corrections are not part of
+    /// the grasp's reaction or force limit, so they are off by default (with them, the grip
+    /// force of a hanging grasped sheet read below its weight); scenes that drag large sheets
+    /// turn them on (`grasp_tethers: true`). Needs `tethers`.
+    pub grasp_tethers: bool,
+    /// Strain a grasp tether allows before it acts (fraction of the edge's rest length, >= 0).
+    pub grasp_tether_slack: f64,
     /// Extra distance, m, added to `thickness / 2 + |v| dt` when querying rigid colliders once per
     /// step.
     pub contact_margin: f64,
@@ -155,6 +168,8 @@ impl Default for SolverSettings {
             self_collision_margin: 0.01,
             tethers: true,
             tether_metric: TetherMetric::Graph,
+            grasp_tethers: false,
+            grasp_tether_slack: 0.05,
             contact_margin: 0.01,
             attachment_compliance: 0.0,
             edge_contacts: false,
@@ -185,6 +200,13 @@ impl SolverSettings {
             0.0,
             false,
             "a finite value >= 0 m",
+        )?;
+        check_param(
+            "settings.grasp_tether_slack",
+            self.grasp_tether_slack,
+            0.0,
+            false,
+            "a finite fraction >= 0 of the rest length",
         )?;
         check_param(
             "settings.contact_margin",

@@ -68,6 +68,10 @@ pub struct ClothParams {
     /// Self-collision on or off (default off).
     #[serde(default)]
     pub self_collision: Option<bool>,
+    /// Tethers anchored at grasped particles too (default off, see
+    /// [`SolverSettings::grasp_tethers`]).
+    #[serde(default)]
+    pub grasp_tethers: Option<bool>,
     /// Particles pinned to the world.
     #[serde(default)]
     pub pins: Vec<NodeSelect>,
@@ -266,6 +270,7 @@ impl BodyKind for ClothKind {
             substeps: params.substeps.unwrap_or(s.substeps),
             iterations: params.iterations.unwrap_or(s.iterations),
             self_collision: params.self_collision.unwrap_or(s.self_collision),
+            grasp_tethers: params.grasp_tethers.unwrap_or(s.grasp_tethers),
             ..s
         };
         settings

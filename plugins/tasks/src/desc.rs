@@ -201,9 +201,22 @@ pub struct HeldDesc {
 pub struct RouteStep {
     /// Base goal: x, y (m, world frame) and heading (degrees).
     pub base: (f64, f64, f64),
-    /// Hand goal in the base frame, m (default: stay where the hand's target is).
+    /// Hand goal in the base frame, m (default: stay where the hand's target is). With
+    /// `hand_at` it is an offset (base frame) from that point.
     #[serde(default)]
     pub hand: Option<(f64, f64, f64)>,
+    /// The hand goes to a named task point (`points` or `targets`, e.g. a cloth's handle), read
+    /// at every step of the leg, plus the `hand` offset (base frame).
+    #[serde(default)]
+    pub hand_at: Option<String>,
+    /// Hand orientation goal in the base frame: roll, pitch, yaw in degrees (default: keep the
+    /// orientation); it turns at up to the arm's angular speed and is held on later legs.
+    #[serde(default)]
+    pub hand_rpy: Option<(f64, f64, f64)>,
+    /// The leg ends only once the measured hand (tool centre point) is within this distance of
+    /// the hand goal, m (default: the hand target within 2 cm is enough).
+    #[serde(default)]
+    pub hand_tolerance: Option<f64>,
     /// Gripper state from this leg on (default: as on the leg before; open at the start).
     #[serde(default)]
     pub closed: Option<bool>,

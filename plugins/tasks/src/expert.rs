@@ -151,11 +151,16 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     if route.is_empty() {
                         return Err("the route expert needs the task's `route` legs".into());
                     }
+                    check(route.iter().all(|l| {
+                        l.hand.is_none() && l.hand_at.is_none() && l.hand_rpy.is_none()
+                    }))?;
+                    let desc = &task.model.desc;
                     for (i, l) in route.iter().enumerate() {
                         for (field, v) in [
                             ("speed", l.speed),
                             ("hand_speed", l.hand_speed),
                             ("tolerance", l.tolerance),
+                            ("hand_tolerance", l.hand_tolerance),
                         ] {
                             if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
                                 return Err(format!(
@@ -163,12 +168,21 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                                 ));
                             }
                         }
+                        if let Some(n) = &l.hand_at {
+                            if !desc.points.contains_key(n) && !desc.targets.contains_key(n) {
+                                return Err(format!(
+                                    "task.route[{i}].hand_at: \"{n}\" is not a point or target of the task (points {:?}, targets {:?})",
+                                    desc.points.keys().collect::<Vec<_>>(),
+                                    desc.targets.keys().collect::<Vec<_>>()
+                                ));
+                            }
+                        }
                     }
-                    check(route.iter().all(|l| l.hand.is_none()))?;
                     Ok(Box::new(RouteExpert {
                         robot,
                         route,
                         leg: 0,
+                        bias: Vector3::zeros(),
                     }))
                 }
                 other => Err(format!("no scripted expert named \"{other}\"")),
@@ -229,6 +243,22 @@ fn write_action(
     closed: bool,
     action: &mut [f32],
 ) -> Result<(), String> {
+    write_action_rot(env, rt, yaw, base_world, ee_base, None, closed, action)
+}
+
+/// [`write_action`] with an optional hand orientation goal in the base frame, approached at up
+/// to the arm's angular speed.
+#[allow(clippy::too_many_arguments)]
+fn write_action_rot(
+    env: &Env,
+    rt: &RobotRuntime,
+    yaw: f64,
+    base_world: (Vector2<f64>, f64),
+    ee_base: Vector3<f64>,
+    rot: Option<UnitQuaternion<f64>>,
+    closed: bool,
+    action: &mut [f32],
+) -> Result<(), String> {
     let dt = step_dt(env);
     let m = rt.fixed.modes;
     let mut k = 0;
@@ -246,11 +276,26 @@ fn write_action(
             for i in 0..3 {
                 action[k + i] = d[i].clamp(-1.0, 1.0) as f32;
             }
-            action[k + 3..k + 6].fill(0.0);
+            // rotation error in the base frame (targets turn by left multiplication)
+            let w = rot.map_or(Vector3::zeros(), |g| {
+                (g * rt.ee_target.rotation.inverse()).scaled_axis() / (m.ee_angular_speed * dt)
+            });
+            for i in 0..3 {
+                action[k + 3 + i] = w[i].clamp(-1.0, 1.0) as f32;
+            }
             k += 6;
         }
         ArmMode::EePoseAbsolute => {
-            let r: UnitQuaternion<f64> = rt.ee_target.rotation;
+            let cur: UnitQuaternion<f64> = rt.ee_target.rotation;
+            let r = rot.map_or(cur, |g| {
+                let max = m.ee_angular_speed * dt;
+                let e = (g * cur.inverse()).scaled_axis();
+                if e.norm() > max {
+                    UnitQuaternion::from_scaled_axis(e * (max / e.norm())) * cur
+                } else {
+                    g
+                }
+            });
             let rv = r.scaled_axis();
             for i in 0..3 {
                 action[k + i] = ee_base[i] as f32;
@@ -342,16 +387,22 @@ struct RouteExpert {
     robot: String,
     route: Vec<RouteStep>,
     leg: usize,
+    /// Correction added to the hand target on a leg with `hand_tolerance` (base frame, m): an
+    /// integral of the measured hand's error, so the hand itself reaches the goal although the
+    /// arm's tracking sags.
+    bias: Vector3<f64>,
 }
 
 impl Policy for RouteExpert {
     fn reset(&mut self, _seed: u64) {
         self.leg = 0;
+        self.bias = Vector3::zeros();
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
         if episode_start(env) {
             self.leg = 0;
+            self.bias = Vector3::zeros();
         }
         let rt = robot_of(env, &self.robot)?;
         let (obs, yaw) = observe(env, rt)?;
@@ -363,21 +414,60 @@ impl Policy for RouteExpert {
             .rev()
             .find_map(|l| l.closed)
             .unwrap_or(false);
+        let rot = self.route[..=self.leg]
+            .iter()
+            .rev()
+            .find_map(|l| l.hand_rpy)
+            .map(|(r, p, y)| {
+                UnitQuaternion::from_euler_angles(r.to_radians(), p.to_radians(), y.to_radians())
+            });
         let leg = &self.route[self.leg];
         let goal = Vector2::new(leg.base.0, leg.base.1);
         let heading = leg.base.2.to_radians();
         let err = goal - b;
         let dyaw = (heading - yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
             - std::f64::consts::PI;
-        let hand_goal = leg.hand.map(|h| Vector3::new(h.0, h.1, h.2));
-        let hand_err = hand_goal.map_or(0.0, |h| (h - cur).norm());
+        let offset = leg.hand.map(|h| Vector3::new(h.0, h.1, h.2));
+        let hand_goal = match &leg.hand_at {
+            Some(name) => {
+                let p = point(env, name)?;
+                let local = obs.base.inverse_transform_point(&p.into()).coords;
+                Some(local + offset.unwrap_or_else(Vector3::zeros))
+            }
+            None => offset,
+        };
+        let tcp = obs
+            .base
+            .inverse_transform_point(&obs.ee.translation.vector.into())
+            .coords;
+        let hand_reached = match (leg.hand_tolerance, hand_goal) {
+            (Some(t), Some(h)) => (h - tcp).norm() < t,
+            _ => hand_goal.is_none_or(|h| (h - cur).norm() < 0.02),
+        };
+        let hand_goal = match (leg.hand_tolerance, hand_goal) {
+            (Some(_), Some(h)) => {
+                // integrate the measured error once the target has arrived
+                if (h + self.bias - cur).norm() < 0.02 {
+                    self.bias += 0.2 * (h - tcp);
+                    let n = self.bias.norm();
+                    if n > 0.15 {
+                        self.bias *= 0.15 / n;
+                    }
+                }
+                Some(h + self.bias)
+            }
+            (_, h) => h,
+        };
+        let rot_reached = rot.is_none_or(|g| g.angle_to(&rt.ee_target.rotation) < 0.05);
         let tol = leg.tolerance.unwrap_or(0.05);
         if err.norm() < tol
             && dyaw.abs() < 3f64.to_radians()
-            && hand_err < 0.02
+            && hand_reached
+            && rot_reached
             && self.leg + 1 < self.route.len()
         {
             self.leg += 1;
+            self.bias = Vector3::zeros();
         }
         let speed = leg.speed.unwrap_or(0.4);
         let mut v = 1.5 * err;
@@ -397,6 +487,6 @@ impl Policy for RouteExpert {
             }
             None => cur,
         };
-        write_action(env, rt, yaw, (v, wz), ee, closed, action)
+        write_action_rot(env, rt, yaw, (v, wz), ee, rot, closed, action)
     }
 }

@@ -45,7 +45,7 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 11] = [
+pub const IMPLEMENTED: [&str; 13] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
@@ -57,6 +57,8 @@ pub const IMPLEMENTED: [&str; 11] = [
     "MoDe-Franka-Drag-v0",
     "MoDe-Spot-Drag-v0",
     "MoDe-Franka-Lift-v0",
+    "MoDe-Franka-Uncover-v0",
+    "MoDe-Spot-Uncover-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -167,6 +169,18 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "curtain/spot.scene.ron",
         include_str!("../../../scenes/curtain/spot.scene.ron"),
+    ),
+    (
+        "uncover/uncover.task.ron",
+        include_str!("../../../scenes/uncover/uncover.task.ron"),
+    ),
+    (
+        "uncover/franka.scene.ron",
+        include_str!("../../../scenes/uncover/franka.scene.ron"),
+    ),
+    (
+        "uncover/spot.scene.ron",
+        include_str!("../../../scenes/uncover/spot.scene.ron"),
     ),
 ];
 
