@@ -132,6 +132,7 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Franka-Drag-v0", 43, 9),
         ("MoDe-Spot-Drag-v0", 41, 9),
         ("MoDe-Franka-Lift-v0", 43, 10),
+        ("MoDe-Spot-Lift-v0", 41, 10),
         ("MoDe-Franka-Uncover-v0", 46, 10),
         ("MoDe-Spot-Uncover-v0", 44, 10),
     ] {
@@ -559,7 +560,16 @@ fn every_implemented_environment_has_its_expert_tested() {
     for id in modesuite::tasks::IMPLEMENTED {
         let task = id.split('-').nth(2).unwrap();
         assert!(
-            ["Place", "Curtain", "Bend", "Transport", "Drag", "Lift", "Uncover"].contains(&task),
+            [
+                "Place",
+                "Curtain",
+                "Bend",
+                "Transport",
+                "Drag",
+                "Lift",
+                "Uncover"
+            ]
+            .contains(&task),
             "{id}: add an expert test for {task}"
         );
     }

@@ -45,7 +45,7 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 13] = [
+pub const IMPLEMENTED: [&str; 14] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
@@ -57,6 +57,7 @@ pub const IMPLEMENTED: [&str; 13] = [
     "MoDe-Franka-Drag-v0",
     "MoDe-Spot-Drag-v0",
     "MoDe-Franka-Lift-v0",
+    "MoDe-Spot-Lift-v0",
     "MoDe-Franka-Uncover-v0",
     "MoDe-Spot-Uncover-v0",
 ];
@@ -145,6 +146,10 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "lift/franka.scene.ron",
         include_str!("../../../scenes/lift/franka.scene.ron"),
+    ),
+    (
+        "lift/spot.scene.ron",
+        include_str!("../../../scenes/lift/spot.scene.ron"),
     ),
     (
         "place/place.task.ron",
