@@ -1926,7 +1926,7 @@ impl Cloth {
                 impulse,
                 lambda: vec![Vector3::zeros(); k],
                 cand: vec![Vector3::zeros(); k],
-                });
+            });
         }
         if r.k != state.len() {
             return Err(bad("trailing values"));

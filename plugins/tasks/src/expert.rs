@@ -151,9 +151,11 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     if route.is_empty() {
                         return Err("the route expert needs the task's `route` legs".into());
                     }
-                    check(route.iter().all(|l| {
-                        l.hand.is_none() && l.hand_at.is_none() && l.hand_rpy.is_none()
-                    }))?;
+                    check(
+                        route.iter().all(|l| {
+                            l.hand.is_none() && l.hand_at.is_none() && l.hand_rpy.is_none()
+                        }),
+                    )?;
                     let desc = &task.model.desc;
                     for (i, l) in route.iter().enumerate() {
                         if let Some(n) = &l.hand_at {
