@@ -226,6 +226,45 @@ fn uncover_success_needs_the_table_cleared_and_the_handle_pulled_out() {
 }
 
 #[test]
+fn route_legs_with_bad_hand_goals_are_refused_with_the_leg() {
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/uncover/franka.scene.ron"),
+    )
+    .unwrap();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/uncover");
+    for (from, to, expect) in [
+        (
+            r#"hand_at: "handle", hand_tolerance: 0.015"#,
+            r#"hand_at: "handel", hand_tolerance: 0.015"#,
+            r#"route[4].hand_at: "handel" is not a point or target"#,
+        ),
+        (
+            "hand_tolerance: 0.015",
+            "hand_tolerance: -0.015",
+            "route[4].hand_tolerance = -0.015: a distance > 0 m",
+        ),
+        (
+            "hand_rpy: (180.0, -50.0, 0.0)",
+            "hand_rpy: (180.0, inf, 0.0)",
+            "route[0].hand_rpy = (180, inf, 0): finite",
+        ),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let desc = modesuite::engine::scene::parse_str(&text.replace(from, to), "<test>").unwrap();
+        let mut app = modesuite::cli::default_app();
+        let model = app
+            .compile_scene(&desc, &SceneSource::in_memory(dir.clone()))
+            .unwrap();
+        app.spawn_scene(model).unwrap();
+        let mut env = Env::new(app);
+        env.reset(Some(0));
+        let e = make_policy(PolicyKind::Scripted, &env).err().unwrap();
+        println!("{e}");
+        assert!(e.contains(expect), "{e}");
+    }
+}
+
+#[test]
 fn transport_goal_moves_from_t1_to_t2_once_the_base_reaches_t1() {
     let mut env = make("MoDe-Franka-Transport-v0", None);
     let zero = [0.0f32; 9];

@@ -158,6 +158,20 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     )?;
                     let desc = &task.model.desc;
                     for (i, l) in route.iter().enumerate() {
+                        if let Some((r, p, y)) = l.hand_rpy {
+                            if !(r.is_finite() && p.is_finite() && y.is_finite()) {
+                                return Err(format!(
+                                    "route[{i}].hand_rpy = ({r}, {p}, {y}): finite roll, pitch, yaw in degrees"
+                                ));
+                            }
+                        }
+                        if let Some(t) = l.hand_tolerance {
+                            if !(t.is_finite() && t > 0.0) {
+                                return Err(format!(
+                                    "route[{i}].hand_tolerance = {t}: a distance > 0 m"
+                                ));
+                            }
+                        }
                         if let Some(n) = &l.hand_at {
                             if !desc.points.contains_key(n) && !desc.targets.contains_key(n) {
                                 return Err(format!(
