@@ -111,6 +111,7 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Spot-Drag-v0", 41, 9),
         ("MoDe-Franka-Uncover-v0", 46, 10),
         ("MoDe-Spot-Uncover-v0", 44, 10),
+        ("MoDe-Franka-Cover-v0", 46, 10),
     ] {
         let env = make(id, None);
         let s = env.spaces();
@@ -221,6 +222,48 @@ fn uncover_success_needs_the_table_cleared_and_the_handle_pulled_out() {
         assert_eq!(v["success/handle_out"] != 0.0, out, "{d:?}");
         assert_eq!(o.info.success, Some(success));
         assert_eq!(o.terminated, success);
+        assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
+    }
+}
+
+#[test]
+fn cover_success_needs_the_gap_spanned_and_the_handle_on_the_second_cube() {
+    const COVER: &str = "MoDe-Franka-Cover-v0";
+    let zero = [0.0f32; 10];
+    // the fabric is spawned flat on the floor over x 0.4 .. 1.2, y -1.1 .. -0.5 (+- its
+    // offset), its handle at the corner (1.2, -0.5); each case moves it rigidly, handle first
+    for (handle, success, covered, on_cube) in [
+        // handle at (1.64, 0.35, 0.31): the fabric spans x 0.84 .. 1.64, y -0.25 .. 0.35 on
+        // the cube tops: 97 % of the gap's x range
+        ((1.64, 0.35, 0.31), true, true, true),
+        // fabric centred over the gap, handle beyond the cube's top (x 1.8 + 0.1)
+        ((1.9, 0.3, 0.31), false, true, false),
+        // handle on the cube but the fabric reaches only x 1.45: a third of the gap open
+        ((1.45, 0.35, 0.31), false, false, true),
+    ] {
+        let mut env = make(COVER, None);
+        {
+            let mut ctx = env.app.world.resource_mut::<modesuite::pbd::PbdContext>();
+            let cloth = &mut ctx.bodies[0].solver;
+            let h = cloth
+                .positions()
+                .iter()
+                .copied()
+                .max_by(|a, b| (a.x + a.y).total_cmp(&(b.x + b.y)))
+                .unwrap();
+            let d = Vector3::new(handle.0, handle.1, handle.2) - h;
+            let moved: Vec<_> = cloth.positions().iter().map(|p| p + d).collect();
+            cloth.set_positions(&moved).unwrap();
+        }
+        let o = env.step(&zero);
+        let v = &o.info.values;
+        println!(
+            "handle moved to {handle:?}: success {:?}, gap covered {}, handle on cube {}",
+            o.info.success, v["success/gap_covered"], v["success/handle_on_cube"]
+        );
+        assert_eq!(v["success/gap_covered"] != 0.0, covered, "{handle:?}");
+        assert_eq!(v["success/handle_on_cube"] != 0.0, on_cube, "{handle:?}");
+        assert_eq!(o.info.success, Some(success));
         assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
     }
 }
@@ -498,7 +541,7 @@ fn every_implemented_environment_has_its_expert_tested() {
     for id in modesuite::tasks::IMPLEMENTED {
         let task = id.split('-').nth(2).unwrap();
         assert!(
-            ["Place", "Curtain", "Bend", "Transport", "Drag", "Uncover"].contains(&task),
+            ["Place", "Curtain", "Bend", "Transport", "Drag", "Uncover", "Cover"].contains(&task),
             "{id}: add an expert test for {task}"
         );
     }
@@ -532,6 +575,11 @@ fn drag_experts_succeed_on_several_seeds() {
 #[test]
 fn uncover_experts_succeed_on_several_seeds() {
     task_experts("Uncover");
+}
+
+#[test]
+fn cover_experts_succeed_on_several_seeds() {
+    task_experts("Cover");
 }
 
 fn expert_seeds(id: &str, seeds: &[u64]) {
@@ -677,6 +725,8 @@ fn cloth_region_terms_measure_the_napkin() {
             (term: "cloth_coverage", params: (object: "napkin", min: (0.72, -0.1), max: (0.92, 0.1))),
             (term: "cloth_coverage", params: (object: "napkin", min: (2.0, 2.0), max: (2.5, 2.5), at_least: 0.5)),
             (term: "cloth_fraction_above", params: (object: "napkin", min: (0.6, -0.3), max: (1.2, 0.3), at_most: 0.05)),
+            (term: "cloth_coverage", params: (object: "napkin", min: (0.72, -0.1), max: (0.92, 0.1), above: 0.4)),
+            (term: "cloth_coverage", params: (object: "napkin", min: (0.72, -0.1), max: (0.92, 0.1), above: 0.5)),
         ])}),
         "robots": ["#,
     );
@@ -689,7 +739,7 @@ fn cloth_region_terms_measure_the_napkin() {
     let mut env = Env::new(app);
     let (o, _) = env.reset(Some(0));
     println!("napkin terms: {o:?}");
-    assert_eq!(o.len(), 5);
+    assert_eq!(o.len(), 7);
     assert_eq!(o[0], 1.0, "every particle over the table");
     // 13 x 13 particles, columns at x = 0.67 + 0.025 i: those with x <= 0.82 are 7 of 13.
     assert!((o[1] - 7.0 / 13.0).abs() < 1e-6, "{}", o[1]);
@@ -700,6 +750,9 @@ fn cloth_region_terms_measure_the_napkin() {
     );
     assert_eq!(o[3], 0.0, "a far region is not");
     assert_eq!(o[4], 0.0, "at_most 0.05 does not hold");
+    // the napkin lies at 0.455 m: covering with `above: 0.4`, not with `above: 0.5`
+    assert!(o[5] > 0.99 && o[5] == o[2], "{}", o[5]);
+    assert_eq!(o[6], 0.0, "nothing above 0.5 m");
 }
 
 #[test]
