@@ -541,7 +541,16 @@ fn every_implemented_environment_has_its_expert_tested() {
     for id in modesuite::tasks::IMPLEMENTED {
         let task = id.split('-').nth(2).unwrap();
         assert!(
-            ["Place", "Curtain", "Bend", "Transport", "Drag", "Uncover", "Cover"].contains(&task),
+            [
+                "Place",
+                "Curtain",
+                "Bend",
+                "Transport",
+                "Drag",
+                "Uncover",
+                "Cover"
+            ]
+            .contains(&task),
             "{id}: add an expert test for {task}"
         );
     }
