@@ -135,6 +135,7 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Spot-Lift-v0", 41, 10),
         ("MoDe-Franka-Uncover-v0", 46, 10),
         ("MoDe-Spot-Uncover-v0", 44, 10),
+        ("MoDe-Franka-Cover-v0", 46, 10),
     ] {
         let env = make(id, None);
         let s = env.spaces();
@@ -246,6 +247,87 @@ fn uncover_success_needs_the_table_cleared_and_the_handle_pulled_out() {
         assert_eq!(o.info.success, Some(success));
         assert_eq!(o.terminated, success);
         assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
+    }
+}
+
+#[test]
+fn cover_success_needs_the_gap_spanned_and_the_handle_on_the_second_cube() {
+    const COVER: &str = "MoDe-Franka-Cover-v0";
+    let zero = [0.0f32; 10];
+    // the fabric is spawned flat on the floor over x 0.4 .. 1.2, y -1.1 .. -0.5 (+- its
+    // offset), its handle at the corner (1.2, -0.5); each case moves it rigidly, handle first
+    for (handle, success, covered, on_cube) in [
+        // handle at (1.64, 0.35, 0.31): the fabric spans x 0.84 .. 1.64, y -0.25 .. 0.35 on
+        // the cube tops: 97 % of the gap's x range
+        ((1.64, 0.35, 0.31), true, true, true),
+        // fabric centred over the gap, handle beyond the cube's top (x 1.8 + 0.1)
+        ((1.9, 0.3, 0.31), false, true, false),
+        // handle on the cube but the fabric reaches only x 1.45: a third of the gap open
+        ((1.45, 0.35, 0.31), false, false, true),
+    ] {
+        let mut env = make(COVER, None);
+        {
+            let mut ctx = env.app.world.resource_mut::<modesuite::pbd::PbdContext>();
+            let cloth = &mut ctx.bodies[0].solver;
+            let h = cloth
+                .positions()
+                .iter()
+                .copied()
+                .max_by(|a, b| (a.x + a.y).total_cmp(&(b.x + b.y)))
+                .unwrap();
+            let d = Vector3::new(handle.0, handle.1, handle.2) - h;
+            let moved: Vec<_> = cloth.positions().iter().map(|p| p + d).collect();
+            cloth.set_positions(&moved).unwrap();
+        }
+        let o = env.step(&zero);
+        let v = &o.info.values;
+        println!(
+            "handle moved to {handle:?}: success {:?}, gap covered {}, handle on cube {}",
+            o.info.success, v["success/gap_covered"], v["success/handle_on_cube"]
+        );
+        assert_eq!(v["success/gap_covered"] != 0.0, covered, "{handle:?}");
+        assert_eq!(v["success/handle_on_cube"] != 0.0, on_cube, "{handle:?}");
+        assert_eq!(o.info.success, Some(success));
+        assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
+    }
+}
+
+#[test]
+fn route_legs_with_bad_hand_goals_are_refused_with_the_leg() {
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/uncover/franka.scene.ron"),
+    )
+    .unwrap();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/uncover");
+    for (from, to, expect) in [
+        (
+            r#"hand_at: "handle", hand_tolerance: 0.015"#,
+            r#"hand_at: "handel", hand_tolerance: 0.015"#,
+            r#"route[4].hand_at: "handel" is not a point or target"#,
+        ),
+        (
+            "hand_tolerance: 0.015",
+            "hand_tolerance: -0.015",
+            "route[4].hand_tolerance = -0.015: a positive number",
+        ),
+        (
+            "hand_rpy: (180.0, -50.0, 0.0)",
+            "hand_rpy: (180.0, inf, 0.0)",
+            "route[0].hand_rpy = (180, inf, 0): finite",
+        ),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let desc = modesuite::engine::scene::parse_str(&text.replace(from, to), "<test>").unwrap();
+        let mut app = modesuite::cli::default_app();
+        let model = app
+            .compile_scene(&desc, &SceneSource::in_memory(dir.clone()))
+            .unwrap();
+        app.spawn_scene(model).unwrap();
+        let mut env = Env::new(app);
+        env.reset(Some(0));
+        let e = make_policy(PolicyKind::Scripted, &env).err().unwrap();
+        println!("{e}");
+        assert!(e.contains(expect), "{e}");
     }
 }
 
@@ -567,7 +649,8 @@ fn every_implemented_environment_has_its_expert_tested() {
                 "Transport",
                 "Drag",
                 "Lift",
-                "Uncover"
+                "Uncover",
+                "Cover"
             ]
             .contains(&task),
             "{id}: add an expert test for {task}"
@@ -608,6 +691,11 @@ fn lift_experts_succeed_on_several_seeds() {
 #[test]
 fn uncover_experts_succeed_on_several_seeds() {
     task_experts("Uncover");
+}
+
+#[test]
+fn cover_experts_succeed_on_several_seeds() {
+    task_experts("Cover");
 }
 
 fn expert_seeds(id: &str, seeds: &[u64]) {
@@ -771,6 +859,8 @@ fn cloth_region_terms_measure_the_napkin() {
             (term: "cloth_coverage", params: (object: "napkin", min: (0.72, -0.1), max: (0.92, 0.1))),
             (term: "cloth_coverage", params: (object: "napkin", min: (2.0, 2.0), max: (2.5, 2.5), at_least: 0.5)),
             (term: "cloth_fraction_above", params: (object: "napkin", min: (0.6, -0.3), max: (1.2, 0.3), at_most: 0.05)),
+            (term: "cloth_coverage", params: (object: "napkin", min: (0.72, -0.1), max: (0.92, 0.1), above: 0.4)),
+            (term: "cloth_coverage", params: (object: "napkin", min: (0.72, -0.1), max: (0.92, 0.1), above: 0.5)),
         ])}),
         "robots": ["#,
     );
@@ -783,7 +873,7 @@ fn cloth_region_terms_measure_the_napkin() {
     let mut env = Env::new(app);
     let (o, _) = env.reset(Some(0));
     println!("napkin terms: {o:?}");
-    assert_eq!(o.len(), 5);
+    assert_eq!(o.len(), 7);
     assert_eq!(o[0], 1.0, "every particle over the table");
     // 13 x 13 particles, columns at x = 0.67 + 0.025 i: those with x <= 0.82 are 7 of 13.
     assert!((o[1] - 7.0 / 13.0).abs() < 1e-6, "{}", o[1]);
@@ -794,6 +884,9 @@ fn cloth_region_terms_measure_the_napkin() {
     );
     assert_eq!(o[3], 0.0, "a far region is not");
     assert_eq!(o[4], 0.0, "at_most 0.05 does not hold");
+    // the napkin lies at 0.455 m: covering with `above: 0.4`, not with `above: 0.5`
+    assert!(o[5] > 0.99 && o[5] == o[2], "{}", o[5]);
+    assert_eq!(o[6], 0.0, "nothing above 0.5 m");
 }
 
 #[test]

@@ -1749,6 +1749,13 @@ impl Cloth {
     /// `resolution` x `resolution` grid of sample points (cell centres); the error is at most the
     /// region's boundary cells.
     pub fn covered_area(&self, region: &Region, resolution: usize) -> f64 {
+        self.covered_area_above(region, resolution, f64::NEG_INFINITY)
+    }
+
+    /// [`Cloth::covered_area`] counting only the triangles whose three particles are higher
+    /// than `above` (m): Cover's gap is covered by cloth spanning it, not by cloth lying on the
+    /// floor under it.
+    pub fn covered_area_above(&self, region: &Region, resolution: usize, above: f64) -> f64 {
         let r = resolution.max(1);
         let (x0, y0) = (region.min[0], region.min[1]);
         let dx = (region.max[0] - x0) / r as f64;
@@ -1759,6 +1766,9 @@ impl Cloth {
         let mut covered = vec![false; r * r];
         for t in &self.triangles {
             let [a, b, c] = t.map(|i| self.pos[i as usize]);
+            if !(a.z > above && b.z > above && c.z > above) {
+                continue;
+            }
             let lo_x = a.x.min(b.x).min(c.x);
             let hi_x = a.x.max(b.x).max(c.x);
             let lo_y = a.y.min(b.y).min(c.y);

@@ -158,6 +158,13 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     )?;
                     let desc = &task.model.desc;
                     for (i, l) in route.iter().enumerate() {
+                        if let Some((r, p, y)) = l.hand_rpy {
+                            if !(r.is_finite() && p.is_finite() && y.is_finite()) {
+                                return Err(format!(
+                                    "task.route[{i}].hand_rpy = ({r}, {p}, {y}): finite roll, pitch, yaw in degrees"
+                                ));
+                            }
+                        }
                         for (field, v) in [
                             ("speed", l.speed),
                             ("hand_speed", l.hand_speed),

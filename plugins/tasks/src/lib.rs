@@ -45,7 +45,7 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 14] = [
+pub const IMPLEMENTED: [&str; 15] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
@@ -60,6 +60,7 @@ pub const IMPLEMENTED: [&str; 14] = [
     "MoDe-Spot-Lift-v0",
     "MoDe-Franka-Uncover-v0",
     "MoDe-Spot-Uncover-v0",
+    "MoDe-Franka-Cover-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -186,6 +187,14 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "uncover/spot.scene.ron",
         include_str!("../../../scenes/uncover/spot.scene.ron"),
+    ),
+    (
+        "cover/cover.task.ron",
+        include_str!("../../../scenes/cover/cover.task.ron"),
+    ),
+    (
+        "cover/franka.scene.ron",
+        include_str!("../../../scenes/cover/franka.scene.ron"),
     ),
 ];
 

@@ -385,7 +385,7 @@ struct RegionParams {
     object: String,
     min: (f64, f64),
     max: (f64, f64),
-    /// Only particles higher than this count, m (fraction terms).
+    /// Only particles (fraction) or triangles (coverage) higher than this count, m.
     #[serde(default)]
     above: Option<f64>,
     /// Makes the term a predicate: 1 when the fraction is at most this, else 0.
@@ -690,8 +690,11 @@ pub fn register_library(app: &mut SimApp) {
         app,
         "cloth_coverage",
         Termination,
-        "fraction of the xy rectangle [min, max] covered by a cloth's xy projection; with `at_most`/`at_least` a 0/1 predicate",
-        cloth_region_term(|cloth, region, _| cloth.covered_area(region, 40) / region.area()),
+        "fraction of the xy rectangle [min, max] covered by a cloth's xy projection (only triangles higher than `above`); with `at_most`/`at_least` a 0/1 predicate",
+        cloth_region_term(|cloth, region, p| {
+            cloth.covered_area_above(region, 40, p.above.unwrap_or(f64::NEG_INFINITY))
+                / region.area()
+        }),
     );
     reg(
         app,
