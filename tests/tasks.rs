@@ -1,6 +1,7 @@
 //! The MoDeSuite task environments: spaces, action modes, success and rewards on constructed
 //! states, reset randomisation, episode ends, the scripted expert, and task-section errors.
 
+use bevy_ecs::entity::Entity;
 use modesuite::engine::scene::{SceneDesc, SceneSource};
 use modesuite::engine::{Env, RigidContext, Space};
 use modesuite::robots::Robots;
@@ -926,6 +927,78 @@ fn friction_randomisation_stays_in_range_and_follows_the_seed() {
         r#"events: {"f": Friction(object: "table", range: (0.9, 0.3)), "robot_start""#,
     ));
     assert!(e.contains(r#"events["f"].range"#), "{e}");
+}
+
+#[test]
+fn material_randomisation_stays_in_range_follows_the_seed_and_changes_the_sag() {
+    let with = |range: &str| {
+        place_text(
+            r#"events: {"robot_start""#,
+            &format!(
+                r#"events: {{"rod_material": Material(object: "rod", youngs_modulus: {range}), "robot_start""#
+            ),
+        )
+    };
+    let modulus = |env: &mut Env| {
+        use modesuite::engine::components::Object;
+        let mut q = env.app.world.query::<(Entity, &Object)>();
+        let e = q
+            .iter(&env.app.world)
+            .find(|(_, o)| o.name == "rod")
+            .unwrap()
+            .0;
+        env.app
+            .world
+            .resource::<modesuite::fem::FemContext>()
+            .get(e)
+            .unwrap()
+            .youngs_modulus()
+    };
+    let mut env = Env::new(place_app(&with("(5e5, 2e6)")));
+    let mut seen = Vec::new();
+    for seed in 0..6 {
+        env.reset(Some(seed));
+        let e = modulus(&mut env);
+        assert!((5e5..=2e6).contains(&e), "{e}");
+        seen.push(e);
+    }
+    println!("rod Young's modulus per seed (Pa): {seen:?}");
+    env.reset(Some(2));
+    assert_eq!(modulus(&mut env), seen[2]);
+    assert!(seen.windows(2).all(|w| w[0] != w[1]));
+    // The rod is held at one end: the softer rod's free end hangs lower after 1 s.
+    let mut ends = Vec::new();
+    for range in ["(2e5, 2e5)", "(4e6, 4e6)"] {
+        let mut env = Env::new(place_app(&with(range)));
+        env.reset(Some(0));
+        for _ in 0..60 {
+            let o = env.step(&[0.0; 9]);
+            assert!(o.info.error.is_none(), "{:?}", o.info.error);
+        }
+        ends.push(point(&env, "rod_end").z);
+    }
+    println!(
+        "rod end after 1 s: z {:.4} m at E = 2e5 Pa, {:.4} m at E = 4e6 Pa (softer hangs lower)",
+        ends[0], ends[1]
+    );
+    assert!(ends[0] < ends[1] - 0.01, "{ends:?}");
+    // Errors: a bad range at compile time, a rigid object at reset.
+    let e = scene_error(&with("(2e6, 5e5)"));
+    assert!(
+        e.contains(r#"events["rod_material"].youngs_modulus"#),
+        "{e}"
+    );
+    let text = place_text(
+        r#"events: {"robot_start""#,
+        r#"events: {"m": Material(object: "table", youngs_modulus: (1e5, 2e5)), "robot_start""#,
+    );
+    let mut env = Env::new(place_app(&text));
+    let (_, info) = env.reset(Some(0));
+    let e = info
+        .error
+        .expect("a rigid object has no Young's modulus to set");
+    println!("{e}");
+    assert!(e.contains("table") && e.contains("fem.solid"), "{e}");
 }
 
 #[test]

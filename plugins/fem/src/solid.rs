@@ -371,6 +371,10 @@ pub struct FemSolid {
     /// Block values of the factored matrix (for the chord solver's constrained PCG).
     precond_mat: Vec<Matrix3<f64>>,
     constraint_version: u64,
+    /// Young's modulus of this solid over the model's (per-env material randomisation): the
+    /// Stable Neo-Hookean energy is linear in E at a fixed Poisson ratio, so the elastic (and
+    /// stiffness-damping) energy, gradient and Hessian are scaled by it. Part of the state.
+    stiffness_scale: f64,
     hess: Vec<Matrix3<f64>>,
     grad: Vec<Vector3<f64>>,
     egrad: Vec<Vector3<f64>>,
@@ -431,6 +435,7 @@ impl FemSolid {
             precond: None,
             precond_mat: Vec::new(),
             constraint_version: 0,
+            stiffness_scale: 1.0,
             hess: vec![Matrix3::zeros(); nb],
             grad: z.clone(),
             egrad: z.clone(),
@@ -848,7 +853,29 @@ impl FemSolid {
 
     /// Elastic energy (J).
     pub fn elastic_energy(&self) -> f64 {
-        self.model.energy_only(&self.pos, None).energy
+        self.model.energy_only(&self.pos, None).energy * self.stiffness_scale
+    }
+
+    /// This solid's Young's modulus (Pa): the model's times [`FemSolid::set_youngs_modulus`]'s
+    /// scale.
+    pub fn youngs_modulus(&self) -> f64 {
+        self.model.material.youngs_modulus * self.stiffness_scale
+    }
+
+    /// Sets this solid's Young's modulus (Pa, finite and > 0; the Poisson ratio and density stay
+    /// the model's): a per-env material randomisation. Takes effect from the next step.
+    pub fn set_youngs_modulus(&mut self, youngs_modulus: f64) -> Result<(), FemError> {
+        if !(youngs_modulus.is_finite() && youngs_modulus > 0.0) {
+            return Err(FemError::InvalidParameter {
+                name: "youngs_modulus",
+                value: youngs_modulus,
+                expected: "finite and > 0 Pa",
+            });
+        }
+        self.stiffness_scale = youngs_modulus / self.model.material.youngs_modulus;
+        self.precond = None;
+        self.constraint_version += 1;
+        Ok(())
     }
 
     /// Kinetic energy (J) with the lumped masses.
@@ -1068,6 +1095,7 @@ impl FemSolid {
     /// Factors `c_mass M + c_stiff K(x_ref) + grasp springs` with full constraints eliminated and
     /// partial ones penalised, if the cached factor does not match.
     fn ensure_precond(&mut self, c_mass: f64, c_stiff: f64) -> Result<usize, FemError> {
+        let c_stiff = c_stiff * self.stiffness_scale;
         // active contacts enter the factor as stiff penalties along their normals, quantised to
         // 1e-2 so that a resting contact set reuses the factor; the factor is a pure function of
         // the key and the preconditioner shape (deterministic after snapshot restore)
@@ -1231,7 +1259,7 @@ impl FemSolid {
     /// Total incremental potential at `x`.
     fn potential(&self, p: &Problem, x: &[Vector3<f64>]) -> f64 {
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-        let mut e = self.model.energy_only(x, damping).energy;
+        let mut e = self.model.energy_only(x, damping).energy * self.stiffness_scale;
         for i in 0..self.n_nodes() {
             let m = self.model.mass[i];
             if p.c_mass > 0.0 {
@@ -1276,6 +1304,11 @@ impl FemSolid {
             let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
             self.model
                 .eval(&self.pos, &mut egrad, Some(&mut hess), project, damping);
+            if self.stiffness_scale != 1.0 {
+                let k = self.stiffness_scale;
+                egrad.iter_mut().for_each(|g| *g *= k);
+                hess.iter_mut().for_each(|h| *h *= k);
+            }
             // gradient
             let mut grad = std::mem::take(&mut self.grad);
             for i in 0..n {
@@ -1616,6 +1649,10 @@ impl FemSolid {
         let mut egrad = std::mem::take(&mut self.egrad);
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
         let ks = self.model.eval(&self.pos, &mut egrad, None, false, damping);
+        if self.stiffness_scale != 1.0 {
+            let k = self.stiffness_scale;
+            egrad.iter_mut().for_each(|g| *g *= k);
+        }
         let mut grad = std::mem::take(&mut self.grad);
         for i in 0..n {
             let m = self.model.mass[i];
@@ -2159,8 +2196,8 @@ impl FemSolid {
     // ----------------------------------------------------------------- state
 
     /// Full dynamic state as a flat vector: positions, velocities, step count, external loads,
-    /// world constraints, body poses, attachments, grasps (with slip state) and the
-    /// preconditioner's reference shape. `set_state(get_state())` is a bit-exact round trip.
+    /// world constraints, body poses, attachments, grasps (with slip state), the
+    /// preconditioner's reference shape and the Young's modulus scale. `set_state(get_state())` is a bit-exact round trip.
     pub fn get_state(&self) -> Vec<f64> {
         let mut s = vec![
             STATE_MAGIC,
@@ -2217,6 +2254,7 @@ impl FemSolid {
                 }
             }
         }
+        s.push(self.stiffness_scale);
         s
     }
 
@@ -2334,6 +2372,12 @@ impl FemSolid {
         } else {
             None
         };
+        let stiffness_scale = r.next()?;
+        if !(stiffness_scale.is_finite() && stiffness_scale > 0.0) {
+            return Err(FemError::InvalidState(format!(
+                "stiffness scale {stiffness_scale}: finite and > 0"
+            )));
+        }
         if r.i != state.len() {
             return Err(FemError::InvalidState(format!(
                 "{} trailing values",
@@ -2350,6 +2394,7 @@ impl FemSolid {
         self.attachments = attachments;
         self.grasps = grasps;
         self.precond_at = precond_at;
+        self.stiffness_scale = stiffness_scale;
         self.precond = None;
         self.constraint_version += 1;
         self.refresh_grasp_anchors();

@@ -454,3 +454,52 @@ fn rayleigh_stiffness_damping_dissipates_deformation_not_rigid_motion() {
     println!("free spin energy loss over 30 steps: b = 0 (backward Euler alone) {l0:.3e}, b = 2e-3 s {l1:.3e} (difference < 1e-3)");
     assert!((l1 - l0).abs() < 1e-3);
 }
+
+#[test]
+fn a_changed_youngs_modulus_matches_a_model_built_with_it_and_is_part_of_the_state() {
+    // A clamped bar sagging under gravity for 0.5 s: at E = 3e6 through set_youngs_modulus and
+    // at E = 3e6 from the material, the tips agree (the energy is linear in E).
+    let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.2, 0.04, 0.04), [4, 1, 1]);
+    let stiff = || {
+        FemSolid::new(
+            &nodes,
+            &tets,
+            Material::new(3e6, 0.35, 60.0).unwrap(),
+            FemConfig::default(),
+        )
+        .unwrap()
+    };
+    let tip = |s: &mut FemSolid| {
+        let clamp = s.rest_nodes_where(|p| p.x.abs() < 1e-12);
+        s.fix_nodes(&clamp).unwrap();
+        let mut reactions = Vec::new();
+        for _ in 0..30 {
+            s.step(1.0 / 60.0, gravity(), &NoContacts, &mut reactions)
+                .unwrap();
+        }
+        s.positions()
+            .iter()
+            .map(|p| p.z)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut scaled = bar(FemConfig::default());
+    scaled.set_youngs_modulus(3e6).unwrap();
+    assert_eq!(scaled.youngs_modulus(), 3e6);
+    let (a, b, soft) = (
+        tip(&mut scaled),
+        tip(&mut stiff()),
+        tip(&mut bar(FemConfig::default())),
+    );
+    println!("lowest node after 0.5 s: {a:.6} m (E set to 3e6), {b:.6} m (built at 3e6), {soft:.6} m (1e6); tolerance 1e-9 m");
+    assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+    assert!(soft < a - 2e-4, "the softer bar sags more: {soft} vs {a}");
+    // the modulus travels with the state
+    let mut other = bar(FemConfig::default());
+    other.set_state(&scaled.get_state()).unwrap();
+    assert_eq!(other.youngs_modulus(), 3e6);
+    assert!(matches!(
+        other.set_youngs_modulus(f64::NAN),
+        Err(FemError::InvalidParameter { .. })
+    ));
+    assert!(other.set_youngs_modulus(-1.0).is_err());
+}

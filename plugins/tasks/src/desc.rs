@@ -177,6 +177,14 @@ pub enum EventDesc {
         /// Half-width, m.
         xy: f64,
     },
+    /// Sets the Young's modulus of a `fem.solid` object to a uniform value in `youngs_modulus`
+    /// (Pa; Poisson ratio and density stay the scene's): material randomisation.
+    Material {
+        /// Object name (a `fem.solid`).
+        object: String,
+        /// (lowest, highest) Young's modulus, Pa.
+        youngs_modulus: (f64, f64),
+    },
 }
 
 /// A deformable held by the robot from the start: the selected nodes (object frame, at spawn)

@@ -520,6 +520,20 @@ impl SceneSection for TaskSection {
                         ));
                     }
                 }
+                EventDesc::Material {
+                    object,
+                    youngs_modulus: (lo, hi),
+                } => {
+                    cfg.object(object)
+                        .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+                    if !(lo.is_finite() && hi.is_finite() && 0.0 < *lo && lo <= hi) {
+                        return Err(serr(
+                            &format!("{epath}.youngs_modulus"),
+                            format!("({lo}, {hi})"),
+                            "finite (lowest, highest) with 0 < lowest <= highest, Pa",
+                        ));
+                    }
+                }
             }
         }
         let points = cfg.table;
@@ -1113,8 +1127,14 @@ fn task_reset(
             );
         }
     }
+    // Deformables by name (the material event finds its solid through them).
+    let deformables: Vec<(String, Entity)> =
+        nodes.iter().map(|(e, o, _)| (o.name.clone(), e)).collect();
     // Moves a deformable rigidly (solver and its nodes component).
-    let mut move_object = |name: &str, iso: &Isometry3<f64>| -> Result<(), String> {
+    let mut move_object = |fem: &mut Option<ResMut<FemContext>>,
+                           name: &str,
+                           iso: &Isometry3<f64>|
+     -> Result<(), String> {
         let Some((e, _, mut n)) = nodes.iter_mut().find(|(_, o, _)| o.name == name) else {
             return Err(format!(
                 "object \"{name}\" is not a deformable (fem.solid, pbd.cloth) a task can move"
@@ -1178,7 +1198,7 @@ fn task_reset(
                     .set_joint_positions(rigid, &q)
                     .map_err(|e| e.to_string())?;
                 for c in carry {
-                    move_object(c, &iso)?;
+                    move_object(&mut fem, c, &iso)?;
                 }
                 Ok(())
             }
@@ -1204,9 +1224,32 @@ fn task_reset(
             EventDesc::ObjectOffset { object, xy } => {
                 let d = Vector3::new(rng.range(-xy, *xy), rng.range(-xy, *xy), 0.0);
                 move_object(
+                    &mut fem,
                     object,
                     &Isometry3::from_parts(Translation3::from(d), UnitQuaternion::identity()),
                 )
+            }
+            EventDesc::Material {
+                object,
+                youngs_modulus,
+            } => {
+                let value = rng.range(youngs_modulus.0, youngs_modulus.1);
+                let e = deformables
+                    .iter()
+                    .find(|(n, _)| n == object)
+                    .map(|(_, e)| *e)
+                    .ok_or_else(|| {
+                        format!("object \"{object}\" is not a fem.solid (Material sets a solid's Young's modulus)")
+                    })?;
+                let solid = fem
+                    .as_deref_mut()
+                    .and_then(|f| f.get_mut(e))
+                    .ok_or_else(|| {
+                        format!("object \"{object}\" is not a fem.solid (Material sets a solid's Young's modulus)")
+                    })?;
+                solid
+                    .set_youngs_modulus(value)
+                    .map_err(|er| format!("object \"{object}\": {er}"))
             }
         })();
         if let Err(msg) = r {
