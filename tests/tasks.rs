@@ -227,16 +227,7 @@ fn uncover_success_needs_the_table_cleared_and_the_handle_pulled_out() {
         ((0.0, 1.5, -0.75), false, true, false),
     ] {
         let mut env = make(UNCOVER, None);
-        {
-            let mut ctx = env.app.world.resource_mut::<modesuite::pbd::PbdContext>();
-            let cloth = &mut ctx.bodies[0].solver;
-            let moved: Vec<_> = cloth
-                .positions()
-                .iter()
-                .map(|p| p + Vector3::new(d.0, d.1, d.2))
-                .collect();
-            cloth.set_positions(&moved).unwrap();
-        }
+        translate_cloth(&mut env, |_| Vector3::new(d.0, d.1, d.2));
         let o = env.step(&zero);
         let v = &o.info.values;
         println!(
@@ -249,6 +240,15 @@ fn uncover_success_needs_the_table_cleared_and_the_handle_pulled_out() {
         assert_eq!(o.terminated, success);
         assert_eq!(o.reward, if success { 1.0 } else { 0.0 });
     }
+}
+
+/// Moves the scene's (first) cloth rigidly by the offset `by` computes from its positions.
+fn translate_cloth(env: &mut Env, by: impl Fn(&[Vector3<f64>]) -> Vector3<f64>) {
+    let mut ctx = env.app.world.resource_mut::<modesuite::pbd::PbdContext>();
+    let cloth = &mut ctx.bodies[0].solver;
+    let d = by(cloth.positions());
+    let moved: Vec<_> = cloth.positions().iter().map(|p| p + d).collect();
+    cloth.set_positions(&moved).unwrap();
 }
 
 #[test]
@@ -267,19 +267,15 @@ fn cover_success_needs_the_gap_spanned_and_the_handle_on_the_second_cube() {
         ((1.45, 0.35, 0.31), false, false, true),
     ] {
         let mut env = make(COVER, None);
-        {
-            let mut ctx = env.app.world.resource_mut::<modesuite::pbd::PbdContext>();
-            let cloth = &mut ctx.bodies[0].solver;
-            let h = cloth
-                .positions()
+        // the handle corner is the particle with the largest x + y
+        translate_cloth(&mut env, |pos| {
+            let h = pos
                 .iter()
                 .copied()
                 .max_by(|a, b| (a.x + a.y).total_cmp(&(b.x + b.y)))
                 .unwrap();
-            let d = Vector3::new(handle.0, handle.1, handle.2) - h;
-            let moved: Vec<_> = cloth.positions().iter().map(|p| p + d).collect();
-            cloth.set_positions(&moved).unwrap();
-        }
+            Vector3::new(handle.0, handle.1, handle.2) - h
+        });
         let o = env.step(&zero);
         let v = &o.info.values;
         println!(
@@ -295,11 +291,6 @@ fn cover_success_needs_the_gap_spanned_and_the_handle_on_the_second_cube() {
 
 #[test]
 fn route_legs_with_bad_hand_goals_are_refused_with_the_leg() {
-    let text = std::fs::read_to_string(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/uncover/franka.scene.ron"),
-    )
-    .unwrap();
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/uncover");
     for (from, to, expect) in [
         (
             r#"hand_at: "handle", hand_tolerance: 0.015"#,
@@ -317,14 +308,7 @@ fn route_legs_with_bad_hand_goals_are_refused_with_the_leg() {
             "route[0].hand_rpy = (180, inf, 0): finite",
         ),
     ] {
-        assert!(text.contains(from), "{from}");
-        let desc = modesuite::engine::scene::parse_str(&text.replace(from, to), "<test>").unwrap();
-        let mut app = modesuite::cli::default_app();
-        let model = app
-            .compile_scene(&desc, &SceneSource::in_memory(dir.clone()))
-            .unwrap();
-        app.spawn_scene(model).unwrap();
-        let mut env = Env::new(app);
+        let mut env = Env::new(task_app("uncover", &task_text("uncover", from, to)));
         env.reset(Some(0));
         let e = make_policy(PolicyKind::Scripted, &env).err().unwrap();
         println!("{e}");

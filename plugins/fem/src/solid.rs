@@ -59,7 +59,7 @@ use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::element::{shape_values, NQ};
 use crate::error::FemError;
 use crate::material::Material;
-use crate::model::SolidModel;
+use crate::model::{KernelStats, SolidModel};
 use crate::sparse::{dot, pcg, ProfileCholesky};
 use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::sync::Arc;
@@ -1256,6 +1256,28 @@ impl FemSolid {
         e
     }
 
+    /// Elastic (and stiffness-damping) gradient and Hessian at the current positions, scaled by
+    /// this solid's Young's modulus over the model's.
+    fn eval_elastic(
+        &self,
+        grad: &mut [Vector3<f64>],
+        mut hess: Option<&mut [Matrix3<f64>]>,
+        project: bool,
+        damping: Option<(&[Vector3<f64>], f64)>,
+    ) -> KernelStats {
+        let ks = self
+            .model
+            .eval(&self.pos, grad, hess.as_deref_mut(), project, damping);
+        let k = self.stiffness_scale;
+        if k != 1.0 {
+            grad.iter_mut().for_each(|g| *g *= k);
+            if let Some(h) = hess {
+                h.iter_mut().for_each(|b| *b *= k);
+            }
+        }
+        ks
+    }
+
     /// Total incremental potential at `x`.
     fn potential(&self, p: &Problem, x: &[Vector3<f64>]) -> f64 {
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
@@ -1302,13 +1324,7 @@ impl FemSolid {
             let mut egrad = std::mem::take(&mut self.egrad);
             let mut hess = std::mem::take(&mut self.hess);
             let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-            self.model
-                .eval(&self.pos, &mut egrad, Some(&mut hess), project, damping);
-            if self.stiffness_scale != 1.0 {
-                let k = self.stiffness_scale;
-                egrad.iter_mut().for_each(|g| *g *= k);
-                hess.iter_mut().for_each(|h| *h *= k);
-            }
+            self.eval_elastic(&mut egrad, Some(&mut hess), project, damping);
             // gradient
             let mut grad = std::mem::take(&mut self.grad);
             for i in 0..n {
@@ -1648,11 +1664,7 @@ impl FemSolid {
         let n = self.n_nodes();
         let mut egrad = std::mem::take(&mut self.egrad);
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-        let ks = self.model.eval(&self.pos, &mut egrad, None, false, damping);
-        if self.stiffness_scale != 1.0 {
-            let k = self.stiffness_scale;
-            egrad.iter_mut().for_each(|g| *g *= k);
-        }
+        let ks = self.eval_elastic(&mut egrad, None, false, damping);
         let mut grad = std::mem::take(&mut self.grad);
         for i in 0..n {
             let m = self.model.mass[i];

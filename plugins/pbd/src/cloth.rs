@@ -212,8 +212,8 @@ pub struct Cloth {
     tether_rows: Vec<(u32, u32, f64)>,
     /// Tethers anchored at grasped (force-limited) particles, along the shortest-path tree:
     /// (particle, its parent on the path to the grasp, maximal distance to it m (the edge's rest
-    /// length with the slack), index of the grasp attachment), parents before children.
-    grasp_tether_rows: Vec<(u32, u32, f64, u32)>,
+    /// length with the slack)), parents before children.
+    grasp_tether_rows: Vec<(u32, u32, f64)>,
     /// `(n)` particle adjacency (CSR over mesh edges / distance constraints) for tethers.
     adj_start: Vec<u32>,
     adj: Vec<(u32, f64)>,
@@ -1066,9 +1066,8 @@ impl Cloth {
         let mut anchor = vec![u32::MAX; n];
         // predecessor on the shortest path and the rest length of that edge
         let mut parent = vec![(u32::MAX, 0.0); n];
-        // The attachment each anchor belongs to (u32::MAX: a kinematic pin). Pins win over
-        // grasps for a particle in both; among grasps the first in creation order wins.
-        let mut owner = vec![u32::MAX; n];
+        // Anchors that are grasped particles (a particle both pinned and grasped is a pin).
+        let mut grasped = vec![false; n];
         let mut is_source = vec![false; n];
         let mut heap = BinaryHeap::new();
         for a in self.attachments.iter().filter(|a| a.kinematic) {
@@ -1077,14 +1076,14 @@ impl Cloth {
             }
         }
         if self.settings.grasp_tethers {
-            for (k, a) in self.attachments.iter().enumerate() {
+            for a in &self.attachments {
                 if a.kinematic || a.frame.is_none() {
                     continue;
                 }
                 for &p in &a.particles {
                     if !is_source[p as usize] {
                         is_source[p as usize] = true;
-                        owner[p as usize] = k as u32;
+                        grasped[p as usize] = true;
                     }
                 }
             }
@@ -1102,12 +1101,11 @@ impl Cloth {
             }
             // grasp-anchored particles in the order they are settled (parents first)
             let (par, len) = parent[p as usize];
-            if par != u32::MAX && owner[a as usize] != u32::MAX {
+            if par != u32::MAX && grasped[a as usize] {
                 self.grasp_tether_rows.push((
                     p,
                     par,
                     len * (1.0 + self.settings.grasp_tether_slack),
-                    owner[a as usize],
                 ));
             }
             let (s, e) = (
@@ -1134,7 +1132,7 @@ impl Cloth {
                 TetherMetric::Graph => dist[i],
                 TetherMetric::RestEuclidean => (self.rest[i] - self.rest[a]).norm(),
             };
-            if owner[a] == u32::MAX {
+            if !grasped[a] {
                 self.tether_rows.push((i as u32, a as u32, len));
             }
         }
@@ -1605,7 +1603,7 @@ impl Cloth {
     /// table and dragged Spot back to the table (Spot Uncover: 5 of 8 seeds with it, 8 of 8
     /// without).
     fn solve_grasp_tethers(&mut self) {
-        for &(i, par, len, _) in &self.grasp_tether_rows {
+        for &(i, par, len) in &self.grasp_tether_rows {
             let d = self.pos[i as usize] - self.pos[par as usize];
             let l = d.norm();
             if l > len {

@@ -241,24 +241,11 @@ fn step_dt(env: &Env) -> f64 {
 }
 
 /// Writes the base, arm and gripper parts: a world-frame base velocity (m/s, rad/s) for a base
-/// heading `yaw`, an end-effector position target in the base frame (orientation held) and the
-/// gripper.
-fn write_action(
-    env: &Env,
-    rt: &RobotRuntime,
-    yaw: f64,
-    base_world: (Vector2<f64>, f64),
-    ee_base: Vector3<f64>,
-    closed: bool,
-    action: &mut [f32],
-) -> Result<(), String> {
-    write_action_rot(env, rt, yaw, base_world, ee_base, None, closed, action)
-}
-
-/// [`write_action`] with an optional hand orientation goal in the base frame, approached at up
-/// to the arm's angular speed.
+/// heading `yaw`, an end-effector position target in the base frame, an optional hand
+/// orientation goal in the base frame (approached at up to the arm's angular speed; `None`
+/// holds the orientation) and the gripper.
 #[allow(clippy::too_many_arguments)]
-fn write_action_rot(
+fn write_action(
     env: &Env,
     rt: &RobotRuntime,
     yaw: f64,
@@ -364,7 +351,7 @@ impl Policy for PlaceExpert {
         );
         // The rod is attached to the hand; the fingers stay open around it (closing them would
         // squeeze the 7 cm rod).
-        write_action(env, rt, yaw, (v, -2.0 * yaw), ee, false, action)
+        write_action(env, rt, yaw, (v, -2.0 * yaw), ee, None, false, action)
     }
 }
 
@@ -384,7 +371,7 @@ impl Policy for CurtainExpert {
         let vx = if aligned || b.x > 1.0 { 0.4 } else { 0.2 };
         let v = Vector2::new(vx, -2.0 * b.y);
         let hold = rt.ee_target.translation.vector;
-        write_action(env, rt, yaw, (v, -2.0 * yaw), hold, false, action)
+        write_action(env, rt, yaw, (v, -2.0 * yaw), hold, None, false, action)
     }
 }
 
@@ -496,6 +483,6 @@ impl Policy for RouteExpert {
             }
             None => cur,
         };
-        write_action_rot(env, rt, yaw, (v, wz), ee, rot, closed, action)
+        write_action(env, rt, yaw, (v, wz), ee, rot, closed, action)
     }
 }

@@ -1127,11 +1127,9 @@ fn task_reset(
             );
         }
     }
-    // Deformables by name (the material event finds its solid through them).
-    let deformables: Vec<(String, Entity)> =
-        nodes.iter().map(|(e, o, _)| (o.name.clone(), e)).collect();
     // Moves a deformable rigidly (solver and its nodes component).
-    let mut move_object = |fem: &mut Option<ResMut<FemContext>>,
+    let mut move_object = |nodes: &mut Query<(Entity, &Object, &mut DeformableNodes)>,
+                           fem: &mut Option<ResMut<FemContext>>,
                            name: &str,
                            iso: &Isometry3<f64>|
      -> Result<(), String> {
@@ -1198,7 +1196,7 @@ fn task_reset(
                     .set_joint_positions(rigid, &q)
                     .map_err(|e| e.to_string())?;
                 for c in carry {
-                    move_object(&mut fem, c, &iso)?;
+                    move_object(&mut nodes, &mut fem, c, &iso)?;
                 }
                 Ok(())
             }
@@ -1224,6 +1222,7 @@ fn task_reset(
             EventDesc::ObjectOffset { object, xy } => {
                 let d = Vector3::new(rng.range(-xy, *xy), rng.range(-xy, *xy), 0.0);
                 move_object(
+                    &mut nodes,
                     &mut fem,
                     object,
                     &Isometry3::from_parts(Translation3::from(d), UnitQuaternion::identity()),
@@ -1234,16 +1233,10 @@ fn task_reset(
                 youngs_modulus,
             } => {
                 let value = rng.range(youngs_modulus.0, youngs_modulus.1);
-                let e = deformables
+                let solid = nodes
                     .iter()
-                    .find(|(n, _)| n == object)
-                    .map(|(_, e)| *e)
-                    .ok_or_else(|| {
-                        format!("object \"{object}\" is not a fem.solid (Material sets a solid's Young's modulus)")
-                    })?;
-                let solid = fem
-                    .as_deref_mut()
-                    .and_then(|f| f.get_mut(e))
+                    .find(|(_, o, _)| o.name == *object)
+                    .and_then(|(e, _, _)| fem.as_deref_mut()?.get_mut(e))
                     .ok_or_else(|| {
                         format!("object \"{object}\" is not a fem.solid (Material sets a solid's Young's modulus)")
                     })?;
