@@ -1009,3 +1009,177 @@ fn spot_start_randomisation_moves_the_floating_base_within_range() {
         "every seed its own start"
     );
 }
+
+/// The friction coefficient of a rigid object's first collider.
+fn friction(env: &Env, object: &str) -> f32 {
+    use modesuite::engine::components::Object;
+    use modesuite::engine::rigid::RigidRef;
+    let world = &env.app.world;
+    let rigid = world.resource::<RigidContext>();
+    let body = world
+        .iter_entities()
+        .find(|e| e.get::<Object>().is_some_and(|o| o.name == object))
+        .and_then(|e| e.get::<RigidRef>().map(|r| r.0))
+        .unwrap();
+    let c = rigid.bodies.get(body).unwrap().colliders()[0];
+    rigid.colliders.get(c).unwrap().friction()
+}
+
+/// The Place scene with a free box on the floor and `events` before the robot's start event.
+fn place_with_events(events: &str) -> String {
+    let text = place_text(
+        r#"events: {"robot_start""#,
+        &format!(r#"events: {{{events} "robot_start""#),
+    );
+    text.replace(
+        r#"        (
+            name: "rod","#,
+        r#"        (name: "box", shape: Box(size: (0.2, 0.2, 0.2)), pose: (pos: (3.0, -2.0, 0.1)), body: Dynamic()),
+        (
+            name: "rod","#,
+    )
+}
+
+#[test]
+fn startup_events_hold_for_the_env_and_interval_events_run_on_time() {
+    let text = place_with_events(
+        r#""floor": Startup(Friction(object: "table", range: (0.1, 0.9))),
+           "gust": Interval(every: (0.5, 0.5), event: Push(object: "box", velocity: (1.0, 1.0, 0.0))),"#,
+    );
+    // Startup: drawn at the env's first reset, the same after every later reset.
+    let mut env = Env::new(place_app(&text));
+    let mut seen = Vec::new();
+    for seed in [0, 1, 5, 0] {
+        env.reset(Some(seed));
+        seen.push(friction(&env, "table"));
+    }
+    println!("table friction after resets with seeds 0, 1, 5, 0 of one env: {seen:?}");
+    assert!((0.1..=0.9).contains(&seen[0]), "{seen:?}");
+    assert!(seen.iter().all(|f| *f == seen[0]), "{seen:?}");
+    let first = |seed: u64| {
+        let mut env = Env::new(place_app(&text));
+        env.reset(Some(seed));
+        friction(&env, "table")
+    };
+    let (f0, f1) = (first(0), first(1));
+    println!("a fresh env's table friction: first reset seed 0: {f0}, seed 1: {f1}");
+    assert_eq!(f0, seen[0], "a function of the first reset's seed");
+    assert_ne!(f0, f1, "every env its own draw");
+    // Interval: every 0.5 s of episode time (30 steps at 60 Hz), before that step's physics.
+    let box_speed = |env: &Env| {
+        use modesuite::engine::components::Velocity;
+        let world = &env.app.world;
+        world
+            .iter_entities()
+            .find(|e| {
+                e.get::<modesuite::engine::components::Object>()
+                    .is_some_and(|o| o.name == "box")
+            })
+            .and_then(|e| e.get::<Velocity>().map(|v| v.linear.xy().norm()))
+            .unwrap()
+    };
+    let next = |env: &Env| env.app.world.resource::<TaskState>().next_event.clone();
+    let run = |seed: u64| {
+        let mut env = Env::new(place_app(&text));
+        env.reset(Some(seed));
+        assert_eq!(next(&env), vec![0.5]);
+        let mut speeds = Vec::new();
+        for _ in 0..31 {
+            let o = env.step(&[0.0; 9]);
+            assert!(o.info.error.is_none(), "{:?}", o.info.error);
+            speeds.push(box_speed(&env));
+        }
+        (speeds, next(&env), env.state_hash())
+    };
+    let (speeds, after, hash) = run(3);
+    println!(
+        "box speed after steps 29, 30, 31: {:.4} {:.4} {:.4} m/s; next run at {after:?} s",
+        speeds[28], speeds[29], speeds[30]
+    );
+    assert!(speeds[..30].iter().all(|v| *v < 1e-3), "{speeds:?}");
+    assert!(speeds[30] > 0.05, "pushed on step 31: {}", speeds[30]);
+    assert_eq!(after, vec![1.0]);
+    let (speeds2, _, hash2) = run(3);
+    assert_eq!((speeds2, hash2), (speeds, hash), "deterministic per seed");
+}
+
+#[test]
+fn push_moves_a_cloth_and_refuses_a_static_body() {
+    let text = task_text(
+        "uncover",
+        r#""cover_start": ObjectOffset(object: "cover", xy: 0.05),"#,
+        r#""cover_start": ObjectOffset(object: "cover", xy: 0.05), "gust": Push(object: "cover", velocity: (0.0, 0.0, 0.5)),"#,
+    );
+    let mut env = Env::new(task_app("uncover", &text));
+    let (_, info) = env.reset(Some(4));
+    assert!(info.error.is_none(), "{:?}", info.error);
+    use modesuite::engine::components::Object;
+    let e = env
+        .app
+        .world
+        .iter_entities()
+        .find(|e| e.get::<Object>().is_some_and(|o| o.name == "cover"))
+        .unwrap()
+        .id();
+    let cloth = env
+        .app
+        .world
+        .resource::<modesuite::pbd::PbdContext>()
+        .get(e)
+        .unwrap();
+    let v = cloth.velocities();
+    println!("cover velocity after the push: {:?}", v[0]);
+    assert!(v[0].z.abs() > 0.0 && v[0].z.abs() <= 0.5 && v[0].xy().norm() == 0.0);
+    assert!(v.iter().all(|w| *w == v[0]), "one push for every particle");
+    let text = task_text(
+        "uncover",
+        r#""cover_start": ObjectOffset(object: "cover", xy: 0.05),"#,
+        r#""p": Push(object: "table", velocity: (0.1, 0.1, 0.1)),"#,
+    );
+    let mut env = Env::new(task_app("uncover", &text));
+    let e = env
+        .reset(Some(0))
+        .1
+        .error
+        .expect("a static body is refused");
+    println!("{e}");
+    assert!(
+        e.contains("\"p\"") && e.contains("not a free dynamic body"),
+        "{e}"
+    );
+}
+
+#[test]
+fn startup_and_interval_errors_name_the_event() {
+    for (events, path, what) in [
+        (
+            r#""g": Interval(every: (0.0, 1.0), event: Push(object: "rod", velocity: (1.0, 0.0, 0.0))),"#,
+            r#"events["g"].every"#,
+            "0 < shortest",
+        ),
+        (
+            r#""g": Interval(every: (1.0, 2.0), event: ObjectOffset(object: "rod", xy: 0.1)),"#,
+            r#"events["g"].event"#,
+            "teleport",
+        ),
+        (
+            r#""g": Startup(Interval(every: (1.0, 2.0), event: Push(object: "rod", velocity: (1.0, 0.0, 0.0)))),"#,
+            r#"events["g"].0"#,
+            "do not nest",
+        ),
+        (
+            r#""g": Interval(every: (1.0, 2.0), event: Push(object: "rod", velocity: (-1.0, 0.0, 0.0))),"#,
+            r#"events["g"].event.velocity"#,
+            ">= 0",
+        ),
+        (
+            r#""g": Startup(Friction(object: "nope", range: (0.1, 0.2))),"#,
+            r#"events["g"].0.object"#,
+            "nope",
+        ),
+    ] {
+        let e = scene_error(&place_with_events(events));
+        println!("{e}");
+        assert!(e.contains(path) && e.contains(what), "{e}");
+    }
+}

@@ -619,6 +619,31 @@ impl Cloth {
         Ok(())
     }
 
+    /// Sets all velocities (m/s), e.g. a push; pinned and attached particles (zero inverse mass)
+    /// keep following their anchors, so their entries are ignored.
+    pub fn set_velocities(&mut self, velocities: &[Vector3<f64>]) -> Result<(), PbdError> {
+        if velocities.len() != self.vel.len() {
+            return Err(PbdError::InvalidParameter {
+                field: "velocities",
+                value: format!("{} entries", velocities.len()),
+                expected: "one velocity per particle",
+            });
+        }
+        if !velocities.iter().all(|v| v.iter().all(|x| x.is_finite())) {
+            return Err(PbdError::InvalidParameter {
+                field: "velocities",
+                value: "a non-finite entry".to_string(),
+                expected: "finite velocities, m/s",
+            });
+        }
+        for ((v, new), w) in self.vel.iter_mut().zip(velocities).zip(&self.inv_mass) {
+            if *w > 0.0 {
+                *v = *new;
+            }
+        }
+        Ok(())
+    }
+
     // ------------------------------------------------------------------ groups
 
     /// Names a particle group (a handle or a tracked set). Replaces an existing group.

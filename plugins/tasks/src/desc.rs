@@ -148,9 +148,40 @@ fn one() -> usize {
     1
 }
 
-/// A reset event (randomisation).
+/// An event (randomisation or disturbance). An entry of `events` runs at every reset, unless it
+/// is wrapped in `Startup(...)` (once per env) or `Interval(...)` (during episodes):
+///
+/// ```ron
+/// events: {
+///     "start": RobotPose(xy: 0.1, yaw: 0.1),                                  // every reset
+///     "floor": Startup(Friction(object: "floor", range: (0.4, 1.0))),         // once per env
+///     "gust": Interval(every: (1.0, 3.0), event: Push(object: "cloth", velocity: (0.5, 0.5, 0.2))),
+/// }
+/// ```
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub enum EventDesc {
+    /// Runs the event once per env, at its first reset, with values drawn from a stream derived
+    /// from that reset's seed; they are re-applied after every later reset (a reset restores
+    /// the scene's initial state), so they hold for the env's whole life.
+    Startup(Box<EventDesc>),
+    /// Runs the event during episodes: first after a gap drawn uniformly from `every` (seconds
+    /// of episode time, drawn at reset), then again after each new gap, at most once per env
+    /// step, before the physics of that step. Only events that do not teleport objects
+    /// (`Friction`, `Material`, `Push`) can run at intervals.
+    Interval {
+        /// (shortest, longest) gap between two runs, s (0 < shortest <= longest).
+        every: (f64, f64),
+        /// The event.
+        event: Box<EventDesc>,
+    },
+    /// Adds a velocity drawn uniformly in `+- velocity` (per axis, world frame, m/s) to a
+    /// deformable object (every free node or particle) or to a free rigid body: a push.
+    Push {
+        /// Object name (`fem.solid`, `pbd.cloth` or a dynamic rigid body).
+        object: String,
+        /// Half-widths of the velocity change per axis, m/s.
+        velocity: (f64, f64, f64),
+    },
     /// Moves the robot's holonomic base by a uniform offset (`+- xy` m, `+- yaw` rad about the
     /// base origin) and the `carry` deformables with it (an object held in the gripper).
     RobotPose {
@@ -277,7 +308,7 @@ pub struct TaskDesc {
     /// Observation groups; the env's observation is the group `policy`.
     #[serde(default)]
     pub observations: BTreeMap<String, GroupDesc>,
-    /// Reset events, run in name order.
+    /// Events, in name order: reset events (randomisation), `Startup(...)` and `Interval(...)`.
     #[serde(default)]
     pub events: BTreeMap<String, EventDesc>,
     /// A deformable in the robot's hand from the start.

@@ -1,8 +1,12 @@
 //! The task managers in ECS form: the `task` scene section compiles into an immutable
 //! [`TaskModel`]; every env gets a [`Task`] (resolved points) and a [`TaskState`] (stateful:
-//! targets, previous action, observation history, success), and four systems:
-//! - `task_reset` (`EnvSystems::Reset`): reset events (targets, robot start pose, object offsets),
-//!   drawn from the env's RNG;
+//! targets, previous action, observation history, success), and five systems:
+//! - `task_reset` (`EnvSystems::Reset`): startup events (once per env, from a stream derived at
+//!   its first reset and replayed after every restore) and reset events (targets, robot start
+//!   pose, object offsets, friction, material, push), drawn from the env's RNG; it also draws the
+//!   first time of every interval event;
+//! - `task_interval_events` (between `EnvSystems::ProcessActions` and `Simulate`): interval
+//!   events that are due;
 //! - `task_evaluate` (`EnvSystems::Evaluate`, before the time limit): rewards (weighted terms,
 //!   optional dt scaling), success (all success terms non-zero: terminated, `success = true`,
 //!   bonus), failure terminations;
@@ -17,7 +21,7 @@ use std::sync::Arc;
 use bevy_ecs::prelude::*;
 use modesuite_engine::components::{DeformableNodes, Object, Pose};
 use modesuite_engine::env::{ActionBuffer, ObservationBuffer, StepSignals};
-use modesuite_engine::math::{pose_from_rapier, pose_to_rapier};
+use modesuite_engine::math::{pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier};
 use modesuite_engine::registry::{CompiledSection, SceneSection, SectionCompileContext};
 use modesuite_engine::rigid::RigidRef;
 use modesuite_engine::rng::EnvRng;
@@ -25,8 +29,8 @@ use modesuite_engine::scene::{NamedFrames, SceneError};
 use modesuite_engine::state::{StateHasher, Stateful};
 use modesuite_engine::terms::{check_finite, world_view, ViewQuery};
 use modesuite_engine::{
-    EngineSystems, EnvSystems, RigidContext, SimApp, SimClock, SimErrors, SimSettings, Space,
-    Spaces,
+    EngineSystems, EnvSystems, Phase, RigidContext, SimApp, SimClock, SimErrors, SimSettings,
+    Space, Spaces,
 };
 use modesuite_fem::{FemContext, GraspParams};
 use modesuite_pbd::{Cloth, PbdContext};
@@ -177,6 +181,8 @@ pub struct TaskState {
     pub success: bool,
     /// Progress of every `Stages` point: the index of its current stage.
     pub stages: Vec<usize>,
+    /// Episode time (s) of the next run of every `Interval` event, in event order.
+    pub next_event: Vec<f64>,
 }
 
 impl Stateful for TaskState {
@@ -208,6 +214,9 @@ impl Stateful for TaskState {
         for s in &self.stages {
             h.write_u64(*s as u64);
         }
+        for t in &self.next_event {
+            h.write_f64(*t);
+        }
     }
 }
 
@@ -222,6 +231,118 @@ pub struct TaskObservations(pub BTreeMap<String, Vec<f32>>);
 
 /// The `task` scene section.
 pub struct TaskSection;
+
+/// Checks an event of the task section (`wrapper`: the `Startup`/`Interval` it is inside).
+fn check_event(
+    epath: &str,
+    e: &EventDesc,
+    cfg: &Configure,
+    wrapper: Option<&str>,
+) -> Result<(), SceneError> {
+    match e {
+        EventDesc::RobotPose { xy, yaw, carry } => {
+            if !(xy.is_finite() && *xy >= 0.0 && yaw.is_finite() && *yaw >= 0.0) {
+                return Err(serr(epath, format!("{e:?}"), "finite xy >= 0 and yaw >= 0"));
+            }
+            for c in carry {
+                cfg.object(c)
+                    .map_err(|m| serr(&format!("{epath}.carry"), c.clone(), m))?;
+            }
+        }
+        EventDesc::Friction { object, range } => {
+            cfg.object(object)
+                .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+            let (lo, hi) = *range;
+            if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi) {
+                return Err(serr(
+                    &format!("{epath}.range"),
+                    format!("{range:?}"),
+                    "finite (lowest, highest) with 0 <= lowest <= highest",
+                ));
+            }
+        }
+        EventDesc::ObjectOffset { object, xy } => {
+            cfg.object(object)
+                .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+            if !(xy.is_finite() && *xy >= 0.0) {
+                return Err(serr(
+                    &format!("{epath}.xy"),
+                    xy.to_string(),
+                    "a finite xy >= 0",
+                ));
+            }
+        }
+        EventDesc::Material {
+            object,
+            youngs_modulus: (lo, hi),
+        } => {
+            cfg.object(object)
+                .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+            if !(lo.is_finite() && hi.is_finite() && 0.0 < *lo && lo <= hi) {
+                return Err(serr(
+                    &format!("{epath}.youngs_modulus"),
+                    format!("({lo}, {hi})"),
+                    "finite (lowest, highest) with 0 < lowest <= highest, Pa",
+                ));
+            }
+        }
+        EventDesc::Push { object, velocity } => {
+            cfg.object(object)
+                .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+            let (x, y, z) = *velocity;
+            if ![x, y, z].iter().all(|v| v.is_finite() && *v >= 0.0) {
+                return Err(serr(
+                    &format!("{epath}.velocity"),
+                    format!("{velocity:?}"),
+                    "finite half-widths >= 0, m/s",
+                ));
+            }
+        }
+        EventDesc::Startup(inner) | EventDesc::Interval { event: inner, .. } => {
+            let kind = if matches!(e, EventDesc::Startup(_)) {
+                "Startup"
+            } else {
+                "Interval"
+            };
+            if let Some(outer) = wrapper {
+                return Err(serr(
+                    epath,
+                    kind,
+                    format!("an event inside {outer}(...) (Startup and Interval do not nest)"),
+                ));
+            }
+            if let EventDesc::Interval {
+                every: (lo, hi), ..
+            } = e
+            {
+                if !(lo.is_finite() && hi.is_finite() && 0.0 < *lo && lo <= hi) {
+                    return Err(serr(
+                        &format!("{epath}.every"),
+                        format!("({lo}, {hi})"),
+                        "finite (shortest, longest) with 0 < shortest <= longest, s",
+                    ));
+                }
+                if matches!(
+                    **inner,
+                    EventDesc::RobotPose { .. } | EventDesc::ObjectOffset { .. }
+                ) {
+                    return Err(serr(
+                        &format!("{epath}.event"),
+                        format!("{inner:?}"),
+                        "Friction, Material or Push (RobotPose and ObjectOffset teleport objects: reset or Startup only)",
+                    ));
+                }
+            }
+            let ipath = if kind == "Startup" {
+                format!("{epath}.0")
+            } else {
+                format!("{epath}.event")
+            };
+            check_event(&ipath, inner, cfg, Some(kind))?;
+        }
+    }
+    Ok(())
+}
 
 fn serr(path: &str, value: impl Into<String>, msg: impl Into<String>) -> SceneError {
     SceneError::semantic(path.to_string(), value.into(), msg.into())
@@ -482,59 +603,7 @@ impl SceneSection for TaskSection {
             ));
         }
         for (n, e) in &desc.events {
-            let epath = format!("{path}.events[\"{n}\"]");
-            match e {
-                EventDesc::RobotPose { xy, yaw, carry } => {
-                    if !(xy.is_finite() && *xy >= 0.0 && yaw.is_finite() && *yaw >= 0.0) {
-                        return Err(serr(
-                            &epath,
-                            format!("{e:?}"),
-                            "finite xy >= 0 and yaw >= 0",
-                        ));
-                    }
-                    for c in carry {
-                        cfg.object(c)
-                            .map_err(|m| serr(&format!("{epath}.carry"), c.clone(), m))?;
-                    }
-                }
-                EventDesc::Friction { object, range } => {
-                    cfg.object(object)
-                        .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
-                    let (lo, hi) = *range;
-                    if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi) {
-                        return Err(serr(
-                            &format!("{epath}.range"),
-                            format!("{range:?}"),
-                            "finite (lowest, highest) with 0 <= lowest <= highest",
-                        ));
-                    }
-                }
-                EventDesc::ObjectOffset { object, xy } => {
-                    cfg.object(object)
-                        .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
-                    if !(xy.is_finite() && *xy >= 0.0) {
-                        return Err(serr(
-                            &format!("{epath}.xy"),
-                            xy.to_string(),
-                            "a finite xy >= 0",
-                        ));
-                    }
-                }
-                EventDesc::Material {
-                    object,
-                    youngs_modulus: (lo, hi),
-                } => {
-                    cfg.object(object)
-                        .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
-                    if !(lo.is_finite() && hi.is_finite() && 0.0 < *lo && lo <= hi) {
-                        return Err(serr(
-                            &format!("{epath}.youngs_modulus"),
-                            format!("({lo}, {hi})"),
-                            "finite (lowest, highest) with 0 < lowest <= highest, Pa",
-                        ));
-                    }
-                }
-            }
+            check_event(&format!("{path}.events[\"{n}\"]"), e, &cfg, None)?;
         }
         let points = cfg.table;
         let success_bonus = desc.success_bonus.unwrap_or(0.0);
@@ -766,11 +835,13 @@ impl SceneSection for TaskSection {
             history: vec![VecDeque::new(); model.groups.len()],
             success: false,
             stages: vec![0; stage_slots],
+            next_event: Vec::new(),
         };
         app.world.insert_resource(task);
         app.world.insert_resource(state);
         app.world.insert_resource(TaskObservations::default());
         app.world.insert_resource(TaskPoints::default());
+        app.world.insert_resource(TaskStartup::default());
         app.register_stateful::<TaskState>();
         let mut s = app.world.get_resource_or_insert_with(Spaces::default);
         if !model.groups.is_empty() {
@@ -785,8 +856,10 @@ impl SceneSection for TaskSection {
 /// managers run first; later systems may add to the reward or the observation).
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
 pub enum TaskSystems {
-    /// Reset events (in `EnvSystems::Reset`).
+    /// Reset and startup events (in `EnvSystems::Reset`).
     Reset,
+    /// Interval events (after `EnvSystems::ProcessActions`, before `EnvSystems::Simulate`).
+    Interval,
     /// Rewards, success, terminations (in `EnvSystems::Evaluate`, before the time limit).
     Evaluate,
     /// Observation groups (in `EnvSystems::Observe`).
@@ -799,6 +872,9 @@ pub fn add_task_systems(app: &mut SimApp) {
         modesuite_engine::EnvStep,
         (
             TaskSystems::Reset.in_set(EnvSystems::Reset),
+            TaskSystems::Interval
+                .after(EnvSystems::ProcessActions)
+                .before(EnvSystems::Simulate),
             TaskSystems::Evaluate
                 .in_set(EnvSystems::Evaluate)
                 .before(EngineSystems::TimeLimit),
@@ -808,6 +884,10 @@ pub fn add_task_systems(app: &mut SimApp) {
     app.add_systems(
         modesuite_engine::EnvStep,
         task_reset.in_set(TaskSystems::Reset),
+    );
+    app.add_systems(
+        modesuite_engine::EnvStep,
+        task_interval_events.in_set(TaskSystems::Interval),
     );
     app.add_systems(
         modesuite_engine::EnvStep,
@@ -1083,57 +1163,34 @@ fn planar_move(centre: Vector3<f64>, d: Vector3<f64>, yaw: f64) -> Isometry3<f64
     Isometry3::from_parts(Translation3::from(centre + d), r) * Translation3::from(-centre)
 }
 
-#[allow(clippy::too_many_arguments)]
-fn task_reset(
-    task: Option<Res<Task>>,
-    mut state: Option<ResMut<TaskState>>,
-    robots: Option<Res<Robots>>,
-    mut rigid: Option<ResMut<RigidContext>>,
-    mut rng: ResMut<EnvRng>,
-    mut fem: Option<ResMut<FemContext>>,
-    mut pbd: Option<ResMut<PbdContext>>,
-    mut nodes: Query<(Entity, &Object, &mut DeformableNodes)>,
-    bodies: Query<(&Object, &RigidRef)>,
-    mut frames: Option<ResMut<NamedFrames>>,
-    mut errors: ResMut<SimErrors>,
-) {
-    let (Some(task), Some(state), Some(robots), Some(rigid)) =
-        (task, state.as_deref_mut(), robots, rigid.as_deref_mut())
-    else {
-        return;
-    };
-    let m = &task.model;
-    state.success = false;
-    state.stages.iter_mut().for_each(|k| *k = 0);
-    state.prev_action.clear();
-    for h in state.history.iter_mut() {
-        h.clear();
-    }
-    for (i, (_, t)) in m.targets.iter().enumerate() {
-        let mut p = t.pos;
-        for k in 0..3 {
-            if t.range[k] > 0.0 {
-                p[k] += rng.range(-t.range[k], t.range[k]);
-            }
-        }
-        state.targets[i] = p;
-    }
-    // The targets as named frames `target/<name>`: renderers draw them as markers.
-    if let Some(frames) = frames.as_deref_mut() {
-        for ((name, _), p) in m.targets.iter().zip(&state.targets) {
-            frames.0.insert(
-                format!("target/{name}"),
-                Isometry3::translation(p.x, p.y, p.z),
-            );
-        }
-    }
-    // Moves a deformable rigidly (solver and its nodes component).
-    let mut move_object = |nodes: &mut Query<(Entity, &Object, &mut DeformableNodes)>,
-                           fem: &mut Option<ResMut<FemContext>>,
-                           name: &str,
-                           iso: &Isometry3<f64>|
-     -> Result<(), String> {
-        let Some((e, _, mut n)) = nodes.iter_mut().find(|(_, o, _)| o.name == name) else {
+/// The stream of `Startup` events of one env: derived from the RNG of its first reset and kept
+/// for its life (outside the snapshot, so a reset's restore does not undo it).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct TaskStartup {
+    rng: Option<EnvRng>,
+}
+
+/// Mixed into the first reset's RNG state to derive the `Startup` stream (so startup values are
+/// not the reset events' first draws).
+const STARTUP_SALT: u64 = 0x5eed_57a7_0000_0001;
+
+/// What events change: the rigid world, the deformables, the env's RNG.
+#[derive(bevy_ecs::system::SystemParam)]
+struct EventWorld<'w, 's> {
+    robots: Option<Res<'w, Robots>>,
+    rigid: Option<ResMut<'w, RigidContext>>,
+    rng: ResMut<'w, EnvRng>,
+    fem: Option<ResMut<'w, FemContext>>,
+    pbd: Option<ResMut<'w, PbdContext>>,
+    nodes: Query<'w, 's, (Entity, &'static Object, &'static mut DeformableNodes)>,
+    bodies: Query<'w, 's, (&'static Object, &'static RigidRef)>,
+    errors: ResMut<'w, SimErrors>,
+}
+
+impl EventWorld<'_, '_> {
+    /// Moves a deformable rigidly (its solver and its nodes component).
+    fn move_object(&mut self, name: &str, iso: &Isometry3<f64>) -> Result<(), String> {
+        let Some((e, _, mut n)) = self.nodes.iter_mut().find(|(_, o, _)| o.name == name) else {
             return Err(format!(
                 "object \"{name}\" is not a deformable (fem.solid, pbd.cloth) a task can move"
             ));
@@ -1142,11 +1199,11 @@ fn task_reset(
             n.0.iter()
                 .map(|p| (iso * Point3::from(*p)).coords)
                 .collect();
-        if let Some(s) = fem.as_deref_mut().and_then(|f| f.get_mut(e)) {
+        if let Some(s) = self.fem.as_deref_mut().and_then(|f| f.get_mut(e)) {
             let vel: Vec<Vector3<f64>> = s.velocities().iter().map(|v| iso.rotation * v).collect();
             s.set_positions_velocities(&moved, &vel)
                 .map_err(|e| e.to_string())?;
-        } else if let Some(c) = pbd.as_deref_mut().and_then(|p| p.get_mut(e)) {
+        } else if let Some(c) = self.pbd.as_deref_mut().and_then(|p| p.get_mut(e)) {
             c.set_positions(&moved).map_err(|e| e.to_string())?;
         } else {
             return Err(format!(
@@ -1155,16 +1212,61 @@ fn task_reset(
         }
         n.0 = moved;
         Ok(())
-    };
-    for (name, e) in &m.events {
-        let r: Result<(), String> = (|| match e {
+    }
+
+    /// Adds `dv` to the velocity of a deformable's nodes or of a free rigid body.
+    fn push(&mut self, name: &str, dv: Vector3<f64>) -> Result<(), String> {
+        if let Some((e, _, _)) = self.nodes.iter().find(|(_, o, _)| o.name == name) {
+            if let Some(s) = self.fem.as_deref_mut().and_then(|f| f.get_mut(e)) {
+                let vel: Vec<Vector3<f64>> = s.velocities().iter().map(|v| v + dv).collect();
+                let pos = s.positions().to_vec();
+                return s
+                    .set_positions_velocities(&pos, &vel)
+                    .map_err(|e| e.to_string());
+            }
+            if let Some(c) = self.pbd.as_deref_mut().and_then(|p| p.get_mut(e)) {
+                let vel: Vec<Vector3<f64>> = c.velocities().iter().map(|v| v + dv).collect();
+                return c.set_velocities(&vel).map_err(|e| e.to_string());
+            }
+        }
+        let rigid = self.rigid.as_deref_mut().ok_or("no rigid world")?;
+        let (_, body) = self
+            .bodies
+            .iter()
+            .find(|(o, _)| o.name == name)
+            .ok_or_else(|| format!("object \"{name}\" is neither a deformable nor a rigid body"))?;
+        let b = rigid
+            .bodies
+            .get_mut(body.0)
+            .ok_or_else(|| format!("object \"{name}\": its body is gone"))?;
+        if !b.is_dynamic() || rigid.multibody_joints.rigid_body_link(body.0).is_some() {
+            return Err(format!(
+                "object \"{name}\" is not a free dynamic body (Push moves deformables and free rigid bodies; robot links and fixed or kinematic bodies are not implemented)"
+            ));
+        }
+        let v = vec_to_rapier(&(vec_from_rapier(b.linvel()) + dv));
+        b.set_linvel(v, true);
+        Ok(())
+    }
+
+    /// Draws and applies one event (`Startup`/`Interval` wrappers run their event now).
+    fn apply(&mut self, robot_name: &str, e: &EventDesc) -> Result<(), String> {
+        match e {
+            EventDesc::Startup(inner) | EventDesc::Interval { event: inner, .. } => {
+                self.apply(robot_name, inner)
+            }
             EventDesc::RobotPose { xy, yaw, carry } => {
-                let dx = rng.range(-xy, *xy);
-                let dy = rng.range(-xy, *xy);
-                let dyaw = rng.range(-yaw, *yaw);
+                let dx = self.rng.range(-xy, *xy);
+                let dy = self.rng.range(-xy, *xy);
+                let dyaw = self.rng.range(-yaw, *yaw);
+                let (Some(robots), Some(rigid)) =
+                    (self.robots.as_deref(), self.rigid.as_deref_mut())
+                else {
+                    return Err("the scene has no robots".to_string());
+                };
                 let rt = robots
-                    .get(&m.robot)
-                    .ok_or_else(|| format!("robot \"{}\" is gone", m.robot))?;
+                    .get(robot_name)
+                    .ok_or_else(|| format!("robot \"{robot_name}\" is gone"))?;
                 let centre = rt
                     .observe(rigid)
                     .map_err(|e| e.to_string())?
@@ -1196,13 +1298,15 @@ fn task_reset(
                     .set_joint_positions(rigid, &q)
                     .map_err(|e| e.to_string())?;
                 for c in carry {
-                    move_object(&mut nodes, &mut fem, c, &iso)?;
+                    self.move_object(c, &iso)?;
                 }
                 Ok(())
             }
             EventDesc::Friction { object, range } => {
-                let f = rng.range(range.0, range.1);
-                let (_, body) = bodies
+                let f = self.rng.range(range.0, range.1);
+                let rigid = self.rigid.as_deref_mut().ok_or("no rigid world")?;
+                let (_, body) = self
+                    .bodies
                     .iter()
                     .find(|(o, _)| o.name == *object)
                     .ok_or_else(|| format!("object \"{object}\" is not a rigid body"))?;
@@ -1220,10 +1324,8 @@ fn task_reset(
                 Ok(())
             }
             EventDesc::ObjectOffset { object, xy } => {
-                let d = Vector3::new(rng.range(-xy, *xy), rng.range(-xy, *xy), 0.0);
-                move_object(
-                    &mut nodes,
-                    &mut fem,
+                let d = Vector3::new(self.rng.range(-xy, *xy), self.rng.range(-xy, *xy), 0.0);
+                self.move_object(
                     object,
                     &Isometry3::from_parts(Translation3::from(d), UnitQuaternion::identity()),
                 )
@@ -1232,11 +1334,12 @@ fn task_reset(
                 object,
                 youngs_modulus,
             } => {
-                let value = rng.range(youngs_modulus.0, youngs_modulus.1);
-                let solid = nodes
+                let value = self.rng.range(youngs_modulus.0, youngs_modulus.1);
+                let solid = self
+                    .nodes
                     .iter()
                     .find(|(_, o, _)| o.name == *object)
-                    .and_then(|(e, _, _)| fem.as_deref_mut()?.get_mut(e))
+                    .and_then(|(e, _, _)| self.fem.as_deref_mut()?.get_mut(e))
                     .ok_or_else(|| {
                         format!("object \"{object}\" is not a fem.solid (Material sets a solid's Young's modulus)")
                     })?;
@@ -1244,10 +1347,135 @@ fn task_reset(
                     .set_youngs_modulus(value)
                     .map_err(|er| format!("object \"{object}\": {er}"))
             }
-        })();
-        if let Err(msg) = r {
-            errors.raise(format!("task event \"{name}\": {msg}"));
+            EventDesc::Push { object, velocity } => {
+                let (x, y, z) = *velocity;
+                let dv = Vector3::new(
+                    self.rng.range(-x, x),
+                    self.rng.range(-y, y),
+                    self.rng.range(-z, z),
+                );
+                self.push(object, dv)
+            }
         }
     }
-    rigid.refresh_queries();
+
+    /// Applies `e` and reports a failure as the env's error.
+    fn run(&mut self, robot_name: &str, name: &str, e: &EventDesc) {
+        if let Err(msg) = self.apply(robot_name, e) {
+            self.errors.raise(format!("task event \"{name}\": {msg}"));
+        }
+    }
+}
+
+fn task_reset(
+    task: Option<Res<Task>>,
+    mut state: Option<ResMut<TaskState>>,
+    mut startup: Option<ResMut<TaskStartup>>,
+    mut frames: Option<ResMut<NamedFrames>>,
+    mut ew: EventWorld,
+) {
+    let (Some(task), Some(state)) = (task, state.as_deref_mut()) else {
+        return;
+    };
+    if ew.robots.is_none() || ew.rigid.is_none() {
+        return;
+    }
+    let m = &task.model;
+    state.success = false;
+    state.stages.iter_mut().for_each(|k| *k = 0);
+    state.prev_action.clear();
+    for h in state.history.iter_mut() {
+        h.clear();
+    }
+    // Startup events first, from their own stream: the same values after every reset.
+    if let Some(startup) = startup.as_deref_mut() {
+        let mut episode = *ew.rng;
+        let stream = *startup
+            .rng
+            .get_or_insert_with(|| EnvRng::from_seed(episode.next_u64() ^ STARTUP_SALT));
+        let saved = std::mem::replace(&mut *ew.rng, stream);
+        for (name, e) in m
+            .events
+            .iter()
+            .filter(|(_, e)| matches!(e, EventDesc::Startup(_)))
+        {
+            ew.run(&m.robot, name, e);
+        }
+        *ew.rng = saved;
+    }
+    for (i, (_, t)) in m.targets.iter().enumerate() {
+        let mut p = t.pos;
+        for k in 0..3 {
+            if t.range[k] > 0.0 {
+                p[k] += ew.rng.range(-t.range[k], t.range[k]);
+            }
+        }
+        state.targets[i] = p;
+    }
+    // The targets as named frames `target/<name>`: renderers draw them as markers.
+    if let Some(frames) = frames.as_deref_mut() {
+        for ((name, _), p) in m.targets.iter().zip(&state.targets) {
+            frames.0.insert(
+                format!("target/{name}"),
+                Isometry3::translation(p.x, p.y, p.z),
+            );
+        }
+    }
+    for (name, e) in &m.events {
+        if !matches!(e, EventDesc::Startup(_) | EventDesc::Interval { .. }) {
+            ew.run(&m.robot, name, e);
+        }
+    }
+    // The first run of every interval event.
+    state.next_event.clear();
+    for (_, e) in &m.events {
+        if let EventDesc::Interval { every, .. } = e {
+            let gap = ew.rng.range(every.0, every.1);
+            state.next_event.push(gap);
+        }
+    }
+    if let Some(rigid) = ew.rigid.as_deref_mut() {
+        rigid.refresh_queries();
+    }
+}
+
+/// Runs the interval events that are due at the start of this env step (before its physics).
+fn task_interval_events(
+    task: Option<Res<Task>>,
+    mut state: Option<ResMut<TaskState>>,
+    phase: Res<Phase>,
+    clock: Res<SimClock>,
+    mut ew: EventWorld,
+) {
+    let (Some(task), Some(state)) = (task, state.as_deref_mut()) else {
+        return;
+    };
+    if *phase != Phase::Step || state.next_event.is_empty() {
+        return;
+    }
+    let m = &task.model;
+    let mut fired = false;
+    let intervals = m.events.iter().filter_map(|(n, e)| match e {
+        EventDesc::Interval { every, .. } => Some((n, e, every)),
+        _ => None,
+    });
+    for ((name, e, every), next) in intervals.zip(state.next_event.iter_mut()) {
+        // A little slack so an event due at t = k * dt is not pushed to the next step by
+        // round-off in the clock.
+        if clock.time + 1e-9 < *next {
+            continue;
+        }
+        ew.run(&m.robot, name, e);
+        let gap = ew.rng.range(every.0, every.1);
+        *next += gap;
+        if *next <= clock.time {
+            *next = clock.time + gap;
+        }
+        fired = true;
+    }
+    if fired {
+        if let Some(rigid) = ew.rigid.as_deref_mut() {
+            rigid.refresh_queries();
+        }
+    }
 }
