@@ -131,6 +131,10 @@ pub struct RunArgs {
     /// `(base: Velocity, arm: JointDelta, gripper: Off)`.
     #[arg(long)]
     pub actions: Option<String>,
+    /// Appends an RGB-D image of this camera of the scene's render section to the task's
+    /// `policy` observation (the task environments' robot camera is `robot`, 128 x 128).
+    #[arg(long, value_name = "CAMERA")]
+    pub rgbd: Option<String>,
 }
 
 /// Arguments of `view`.
@@ -211,6 +215,49 @@ pub fn default_app() -> SimApp {
     app
 }
 
+/// Spawns `model` into `app` and, when the task observes camera images, attaches a renderer
+/// (the shared device) so the cameras are rendered in each env's `Sense` pass.
+pub fn spawn_with_cameras(
+    app: &mut SimApp,
+    model: Arc<modesuite_engine::SceneModel>,
+) -> Result<(), CliError> {
+    app.spawn_scene(model)?;
+    let wants = app
+        .world
+        .get_resource::<modesuite_render::CameraRequests>()
+        .is_some_and(|r| !r.0.is_empty());
+    if wants {
+        modesuite_render::prepare(app).map_err(render_err)?;
+    }
+    Ok(())
+}
+
+/// Appends an RGB-D image of `camera` to the task's `policy` observation group (`run --rgbd`):
+/// sets the task section's `camera_observation`.
+pub fn override_rgbd(desc: &mut SceneDesc, camera: &str) -> Result<(), CliError> {
+    let bad = |m: &str| CliError::input(format!("--rgbd {camera}: {m}"));
+    if camera.is_empty() || camera.contains(['"', '\\']) {
+        return Err(bad("a camera name of the scene's render section"));
+    }
+    let raw = desc
+        .extensions
+        .get("task")
+        .ok_or_else(|| bad("the scene has no task section"))?;
+    let text = raw.get_ron();
+    let open = text
+        .find('(')
+        .ok_or_else(|| bad("unreadable task section"))?;
+    let new = format!(
+        "{}(camera_observation: Some((camera: \"{camera}\", channels: Rgbd)), {}",
+        &text[..open],
+        &text[open + 1..]
+    );
+    let value = ron::value::RawValue::from_boxed_ron(new.into_boxed_str())
+        .map_err(|e| bad(&e.to_string()))?;
+    desc.extensions.insert("task".into(), value);
+    Ok(())
+}
+
 /// An env of a scene given as RON text (in-memory source, paths relative to the working
 /// directory), with every default plugin.
 pub fn env_from_text(text: &str) -> Result<Env, SceneError> {
@@ -230,7 +277,7 @@ pub fn env_for_target(target: &str, actions: Option<&str>) -> Result<Env, CliErr
     }
     let mut app = default_app();
     let model = app.compile_scene(&desc, &source)?;
-    app.spawn_scene(model)?;
+    spawn_with_cameras(&mut app, model)?;
     Ok(Env::new(app))
 }
 
@@ -298,6 +345,7 @@ fn run_default(out: &mut dyn Write) -> Result<(), CliError> {
         video_size: "480x320".into(),
         overlays: false,
         policy: "scripted".into(),
+        rgbd: None,
         actions: None,
     };
     run(&args, out)
@@ -576,6 +624,9 @@ fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
     if let Some(a) = &args.actions {
         override_actions(&mut desc, a)?;
     }
+    if let Some(c) = &args.rgbd {
+        override_rgbd(&mut desc, c)?;
+    }
     run_scene(&desc, &source, args, &plugins, out)
 }
 
@@ -843,7 +894,7 @@ fn run_scene(
     }
     RenderConfig::from_scene(&model)?;
     let mut recorder = Recorder::new(&model, args)?;
-    app.spawn_scene(model)?;
+    spawn_with_cameras(&mut app, model)?;
     let mut env = Env::new(app);
     // The CLI resets between episodes itself, so the final state stays for --dump-state.
     env.autoreset = false;

@@ -1183,3 +1183,87 @@ fn startup_and_interval_errors_name_the_event() {
         assert!(e.contains(path) && e.contains(what), "{e}");
     }
 }
+
+#[test]
+fn rgbd_observation_of_the_robot_camera_follows_the_state_terms() {
+    for id in [PLACE, "MoDe-Spot-Uncover-v0"] {
+        let state_dim = make(id, None).spaces().observation.flat_dim();
+        let (mut desc, source) = load(id, None);
+        modesuite::cli::override_rgbd(&mut desc, "robot").unwrap();
+        let mut app = modesuite::cli::default_app();
+        let model = app
+            .compile_scene(&desc, &source)
+            .unwrap_or_else(|e| panic!("{e}"));
+        modesuite::cli::spawn_with_cameras(&mut app, model).unwrap_or_else(|e| panic!("{e}"));
+        let mut env = Env::new(app);
+        let space = env.spaces().observation.clone();
+        let Space::Dict(items) = &space else {
+            panic!("{space:?}")
+        };
+        let names: Vec<&str> = items.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["state", "robot_rgbd"]);
+        assert_eq!(items[0].1.flat_dim(), state_dim);
+        let Space::Box { shape, .. } = &items[1].1 else {
+            panic!()
+        };
+        assert_eq!(shape, &vec![128, 128, 4]);
+        let (obs, info) = env.reset(Some(0));
+        assert!(info.error.is_none(), "{:?}", info.error);
+        assert_eq!(obs.len(), state_dim + 128 * 128 * 4);
+        let image = &obs[state_dim..];
+        let rgb_ok = image
+            .chunks_exact(4)
+            .all(|p| p[..3].iter().all(|c| (0.0..=1.0).contains(c)));
+        let depths: Vec<f32> = image.chunks_exact(4).map(|p| p[3]).collect();
+        let hit = depths.iter().filter(|d| **d > 0.0).count();
+        let (near, far) = depths
+            .iter()
+            .filter(|d| **d > 0.0)
+            .fold((f32::MAX, 0.0f32), |(a, b), d| (a.min(*d), b.max(*d)));
+        let mean_rgb = image
+            .chunks_exact(4)
+            .map(|p| p[0] + p[1] + p[2])
+            .sum::<f32>()
+            / (3.0 * 128.0 * 128.0);
+        println!(
+            "{id}: robot camera 128x128 RGB-D, {hit} of 16384 pixels hit, depth {near:.2}..{far:.2} m, mean RGB {mean_rgb:.3}"
+        );
+        assert!(rgb_ok);
+        // The camera looks down at the floor and the task's furniture ahead of the robot.
+        assert!(hit > 8000, "{hit}");
+        assert!(
+            near > 0.05 && far < 20.0 && far - near > 0.3,
+            "{near} {far}"
+        );
+        // The state part is the state observation of the plain env at the same seed.
+        let mut plain = make(id, None);
+        let (plain_obs, _) = plain.reset(Some(0));
+        assert_eq!(&obs[..state_dim], &plain_obs[..]);
+        let o = env.step(&vec![0.0; env.spaces().action.flat_dim()]);
+        assert!(o.info.error.is_none(), "{:?}", o.info.error);
+        assert_eq!(o.observation.len(), obs.len());
+    }
+    // Errors: a camera the scene does not have, image history.
+    let (mut desc, source) = load(PLACE, None);
+    modesuite::cli::override_rgbd(&mut desc, "nope").unwrap();
+    let app = modesuite::cli::default_app();
+    let e = match app.compile_scene(&desc, &source) {
+        Ok(_) => panic!("an unknown camera is refused"),
+        Err(e) => e.to_string(),
+    };
+    println!("{e}");
+    assert!(
+        e.contains("camera_observation") && e.contains("\"nope\"") && e.contains("robot"),
+        "{e}"
+    );
+    let text = place_text(
+        r#"events: {"robot_start""#,
+        r#"observations: {"policy": (terms: [(term: "base_xy"), (term: "camera", params: (camera: "robot", channels: Depth))], history: 2)}, events: {"robot_start""#,
+    );
+    let e = scene_error(&text);
+    println!("{e}");
+    assert!(
+        e.contains("history") && e.contains("not implemented"),
+        "{e}"
+    );
+}

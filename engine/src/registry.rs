@@ -90,9 +90,17 @@ pub struct SectionCompileContext<'a> {
     pub source: &'a crate::scene::SceneSource,
     /// The app's registries (terms, robots, sensors other plugins registered).
     pub registry: &'a Registry,
+    /// Every section of the scene as written, by key (a section may read another's settings,
+    /// e.g. the task section the cameras of the render section).
+    pub extensions: &'a BTreeMap<String, Box<ron::value::RawValue>>,
 }
 
 impl SectionCompileContext<'_> {
+    /// The RON text of another section of the scene, if it has one.
+    pub fn extension(&self, key: &str) -> Option<&str> {
+        self.extensions.get(key).map(|r| r.get_ron())
+    }
+
     /// Path of the section for error messages: `extensions["key"]`.
     pub fn path(&self) -> String {
         format!("extensions[\"{}\"]", self.key)

@@ -280,8 +280,23 @@ impl RigidContext {
     }
 
     /// Rebuilds the collision query structure from the colliders' current poses (done after
-    /// spawning and after every rapier step).
+    /// spawning and after every rapier step). Colliders attached to a body that was moved
+    /// outside a step (a reset's restore, a robot's start pose) are first put back on their
+    /// body: rapier itself moves them only at its next step, and until then queries and
+    /// cameras would see the old place.
     pub fn refresh_queries(&mut self) {
+        for (_, co) in self.colliders.iter_mut() {
+            let Some(body) = co.parent().and_then(|b| self.bodies.get(b)) else {
+                continue;
+            };
+            let Some(local) = co.position_wrt_parent() else {
+                continue;
+            };
+            let pos = *body.position() * *local;
+            if pos != *co.position() {
+                co.set_position(pos);
+            }
+        }
         self.query_leaves.clear();
         let mut aabbs = Vec::with_capacity(self.colliders.len());
         for (h, co) in self.colliders.iter() {

@@ -638,6 +638,7 @@ fn compile_inner(
             frames: &frames,
             source,
             registry,
+            extensions: &desc.extensions,
         };
         let compiled = handler.compile(&ctx)?;
         sections.push(CompiledSceneSection {

@@ -381,7 +381,9 @@ impl RenderConfig {
         Ok(cfg)
     }
 
-    /// Checks that every camera's `attach` names an object of the scene.
+    /// Checks that every camera's `attach` names an object of the scene; a robot link
+    /// (`robot/link`, spawned by the robots section) is checked when the renderer is attached
+    /// ([`crate::prepare`]).
     pub fn check_attach(
         &self,
         path: &str,
@@ -389,12 +391,12 @@ impl RenderConfig {
     ) -> Result<(), SceneError> {
         for (i, c) in self.cameras.iter().enumerate() {
             if let Some(a) = &c.attach {
-                if !objects.iter().any(|o| &o.name == a) {
+                if !a.contains('/') && !objects.iter().any(|o| &o.name == a) {
                     return Err(SceneError::semantic(
                         format!("{path}.cameras[{i}].attach"),
                         format!("{a:?}"),
                         format!(
-                            "the name of a scene object: [{}]",
+                            "the name of a scene object: [{}], or a robot link `robot/link`",
                             objects
                                 .iter()
                                 .map(|o| o.name.as_str())

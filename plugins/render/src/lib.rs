@@ -187,6 +187,16 @@ pub fn prepare(app: &mut SimApp) -> Result<(), RenderError> {
         )
     })?;
     let renderer = EnvRenderer::for_scene(model)?;
+    for c in &renderer.config().cameras {
+        if let Some(a) = &c.attach {
+            if object_pose(&app.world, a).is_none() {
+                return Err(RenderError::UnknownObject {
+                    camera: c.name.clone(),
+                    object: a.clone(),
+                });
+            }
+        }
+    }
     app.insert_resource(RenderState(renderer));
     Ok(())
 }

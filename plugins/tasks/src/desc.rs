@@ -130,6 +130,49 @@ pub struct ObsTermDesc {
     pub clip: Option<(f64, f64)>,
 }
 
+/// What a camera observation term holds per pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+pub enum CameraChannels {
+    /// Red, green, blue in [0, 1].
+    Rgb,
+    /// Depth along the optical axis, m (0 where nothing was hit).
+    Depth,
+    /// Red, green, blue in [0, 1], then depth in m.
+    #[default]
+    Rgbd,
+}
+
+impl CameraChannels {
+    /// Values per pixel.
+    pub fn count(self) -> usize {
+        match self {
+            CameraChannels::Rgb => 3,
+            CameraChannels::Depth => 1,
+            CameraChannels::Rgbd => 4,
+        }
+    }
+
+    /// Lower-case name (`rgb`, `depth`, `rgbd`).
+    pub fn name(self) -> &'static str {
+        match self {
+            CameraChannels::Rgb => "rgb",
+            CameraChannels::Depth => "depth",
+            CameraChannels::Rgbd => "rgbd",
+        }
+    }
+}
+
+/// An image observation: a camera of the scene's render section (`extensions["render"]`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraObsDesc {
+    /// Camera name.
+    pub camera: String,
+    /// Channels (default `Rgbd`).
+    #[serde(default)]
+    pub channels: CameraChannels,
+}
+
 /// An observation group: its terms concatenated, optional noise and history.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -317,6 +360,10 @@ pub struct TaskDesc {
     /// Legs of the `route` expert, in order (a section that gives any replaces the parent's).
     #[serde(default)]
     pub route: Vec<RouteStep>,
+    /// An image of this camera appended to the `policy` group (a `camera` term): RGB-D
+    /// observations without restating the group's state terms (`run --rgbd`).
+    #[serde(default)]
+    pub camera_observation: Option<CameraObsDesc>,
 }
 
 impl TaskDesc {
@@ -348,6 +395,7 @@ impl TaskDesc {
             } else {
                 self.route
             },
+            camera_observation: self.camera_observation.or(parent.camera_observation),
         }
     }
 }

@@ -14,7 +14,7 @@
 //!   clipped, noise, history); the env's observation is the `policy` group, every group is in
 //!   [`TaskObservations`].
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -34,6 +34,7 @@ use modesuite_engine::{
 };
 use modesuite_fem::{FemContext, GraspParams};
 use modesuite_pbd::{Cloth, PbdContext};
+use modesuite_render::{CameraImages, CameraRequests};
 use modesuite_robots::{RobotObservation, Robots};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
@@ -231,6 +232,25 @@ pub struct TaskObservations(pub BTreeMap<String, Vec<f32>>);
 
 /// The `task` scene section.
 pub struct TaskSection;
+
+/// The cameras of the scene's render section: name -> (width, height).
+fn scene_cameras(ctx: &SectionCompileContext) -> Result<BTreeMap<String, (u32, u32)>, SceneError> {
+    let Some(text) = ctx.extension(modesuite_render::config::EXTENSION_KEY) else {
+        return Ok(BTreeMap::new());
+    };
+    // The render section reports its own errors with their place; an unreadable one leaves
+    // no cameras here.
+    let cfg: Option<modesuite_render::RenderConfig> =
+        modesuite_engine::scene::ron_options().from_str(text).ok();
+    Ok(cfg
+        .map(|c| {
+            c.cameras
+                .iter()
+                .map(|c| (c.name.clone(), (c.width, c.height)))
+                .collect()
+        })
+        .unwrap_or_default())
+}
 
 /// Checks an event of the task section (`wrapper`: the `Startup`/`Interval` it is inside).
 fn check_event(
@@ -460,11 +480,13 @@ impl SceneSection for TaskSection {
             targets.push((n.clone(), Target { pos, range }));
         }
         let target_names: Vec<String> = targets.iter().map(|(n, _)| n.clone()).collect();
+        let cameras = scene_cameras(ctx)?;
         let mut cfg = Configure {
             named: &desc.points,
             targets: &target_names,
             objects: &objects,
             table: Vec::new(),
+            cameras: &cameras,
         };
         let mut named_ids = Vec::new();
         for (n, p) in &desc.points {
@@ -588,12 +610,40 @@ impl SceneSection for TaskSection {
                     clip: t.clip,
                 });
             }
+            if g == "policy" {
+                if let Some(c) = &desc.camera_observation {
+                    terms.push(ObsTerm {
+                        term: NamedTerm {
+                            name: "camera".to_string(),
+                            term: crate::terms::camera_term(c.clone(), &cfg).map_err(|e| {
+                                serr(&format!("{path}.camera_observation"), format!("{c:?}"), e)
+                            })?,
+                        },
+                        scale: 1.0,
+                        clip: None,
+                    });
+                }
+            }
+            if gd.history > 1 && terms.iter().any(|t| t.term.term.image().is_some()) {
+                return Err(serr(
+                    &format!("{gpath}.history"),
+                    gd.history.to_string(),
+                    "1 in a group with camera images (stacked image history is not implemented)",
+                ));
+            }
             groups.push(Group {
                 name: g.clone(),
                 terms,
                 noise: gd.noise,
                 history: gd.history,
             });
+        }
+        if desc.camera_observation.is_some() && !desc.observations.contains_key("policy") {
+            return Err(serr(
+                &format!("{path}.camera_observation"),
+                format!("{:?}", desc.camera_observation),
+                "a task with a \"policy\" observation group to append the image to",
+            ));
         }
         if !desc.observations.is_empty() && !desc.observations.contains_key("policy") {
             return Err(serr(
@@ -818,17 +868,30 @@ impl SceneSection for TaskSection {
             base_height,
             cloths,
         };
-        let obs_dim: usize = model
+        let observation = model
             .groups
             .iter()
             .find(|g| g.name == "policy")
-            .map_or(0, |g| {
-                g.history
-                    * g.terms
-                        .iter()
-                        .map(|t| t.term.term.dim(&dims))
-                        .sum::<usize>()
-            });
+            .map_or(Space::unbounded(0), |g| policy_space(g, &dims));
+        let cameras: BTreeSet<String> = model
+            .groups
+            .iter()
+            .flat_map(|g| &g.terms)
+            .filter_map(|t| t.term.term.image().map(|(c, _)| c.to_string()))
+            .collect();
+        if !cameras.is_empty() {
+            let mut requests = app
+                .world
+                .get_resource_mut::<CameraRequests>()
+                .ok_or_else(|| {
+                    serr(
+                        &format!("{path}.observations"),
+                        format!("cameras {cameras:?}"),
+                        "the render plugin (modesuite.render) for image observations",
+                    )
+                })?;
+            requests.0.extend(cameras);
+        }
         let state = TaskState {
             targets: model.targets.iter().map(|(_, t)| t.pos).collect(),
             prev_action: Vec::new(),
@@ -845,10 +908,60 @@ impl SceneSection for TaskSection {
         app.register_stateful::<TaskState>();
         let mut s = app.world.get_resource_or_insert_with(Spaces::default);
         if !model.groups.is_empty() {
-            s.observation = Space::unbounded(obs_dim);
+            s.observation = observation;
         }
         Ok(())
     }
+}
+
+/// The space of the `policy` group: one unbounded box of every run of state terms (stacked
+/// `history` times) or, with camera terms, a `Dict` of `state` boxes and one
+/// `<camera>_<channels>` box of shape (height, width, channels) per image, in buffer order.
+fn policy_space(g: &Group, dims: &Dims) -> Space {
+    let images = g.terms.iter().any(|t| t.term.term.image().is_some());
+    if !images {
+        let dim: usize = g.terms.iter().map(|t| t.term.term.dim(dims)).sum();
+        return Space::unbounded(g.history * dim);
+    }
+    let mut items: Vec<(String, Space)> = Vec::new();
+    let mut run = 0usize;
+    let mut states = 0usize;
+    let mut flush = |run: &mut usize, items: &mut Vec<(String, Space)>| {
+        if *run > 0 {
+            let name = if states == 0 {
+                "state".to_string()
+            } else {
+                format!("state_{states}")
+            };
+            states += 1;
+            items.push((name, Space::unbounded(*run)));
+            *run = 0;
+        }
+    };
+    for t in &g.terms {
+        match t.term.term.image() {
+            None => run += t.term.term.dim(dims),
+            Some((camera, shape)) => {
+                flush(&mut run, &mut items);
+                let channels = match shape[2] {
+                    1 => "depth",
+                    3 => "rgb",
+                    _ => "rgbd",
+                };
+                let n: usize = shape.iter().product();
+                items.push((
+                    format!("{camera}_{channels}"),
+                    Space::Box {
+                        low: vec![0.0; n],
+                        high: vec![f32::INFINITY; n],
+                        shape: shape.to_vec(),
+                    },
+                ));
+            }
+        }
+    }
+    flush(&mut run, &mut items);
+    Space::Dict(items)
 }
 
 /// The task managers' sets. Other plugins that write `StepSignals` or the observation buffer
@@ -972,6 +1085,7 @@ struct TaskWorld<'w, 's> {
     pbd: Option<Res<'w, PbdContext>>,
     action: Res<'w, ActionBuffer>,
     names: Query<'w, 's, &'static Object>,
+    images: Option<Res<'w, CameraImages>>,
 }
 
 impl TaskWorld<'_, '_> {
@@ -1029,6 +1143,7 @@ impl TaskWorld<'_, '_> {
                 cloths: &cloths,
                 base_height: task.base_height,
                 touching: &touching,
+                images: self.images.as_deref(),
             };
             Ok(f(task, &ctx))
         })();

@@ -16,7 +16,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
-use crate::desc::PointRef;
+use crate::desc::{CameraChannels, CameraObsDesc, PointRef};
 
 /// Index of a point in a task's point table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,6 +32,8 @@ pub struct Configure<'a> {
     pub objects: &'a [String],
     /// The point table (terms add their points with [`Configure::point`]).
     pub table: Vec<PointRef>,
+    /// Cameras of the scene's render section: name -> (width, height), px.
+    pub cameras: &'a std::collections::BTreeMap<String, (u32, u32)>,
 }
 
 impl Configure<'_> {
@@ -137,6 +139,9 @@ pub struct TaskCtx<'a> {
     pub base_height: f64,
     /// Names of the scene objects the robot touches.
     pub touching: &'a [&'a str],
+    /// The frames of the cameras rendered in this env's `Sense` pass (`None` without the
+    /// render plugin).
+    pub images: Option<&'a modesuite_render::CameraImages>,
 }
 
 impl TaskCtx<'_> {
@@ -170,6 +175,11 @@ pub trait TaskTerm: Send + Sync + 'static {
     fn dim(&self, dims: &Dims) -> usize;
     /// Writes `dim` values.
     fn evaluate(&self, ctx: &TaskCtx, out: &mut [f64]) -> Result<(), String>;
+    /// An image term: the camera it reads and its shape (height, width, channels); the task
+    /// requests the camera and the observation space gets an image box for it.
+    fn image(&self) -> Option<(&str, [usize; 3])> {
+        None
+    }
 }
 
 /// A registered term: validates its parameters and returns the configured term.
@@ -248,6 +258,74 @@ where
     F: Fn(&TaskCtx, &mut [f64]) -> Result<(), String> + Send + Sync + 'static,
 {
     Arc::new(Fun { dim, f })
+}
+
+/// The `camera` term: one camera's latest frame, row-major `height x width x channels`.
+struct CameraTerm {
+    camera: String,
+    channels: CameraChannels,
+    shape: [usize; 3],
+}
+
+impl TaskTerm for CameraTerm {
+    fn dim(&self, _: &Dims) -> usize {
+        self.shape.iter().product()
+    }
+    fn evaluate(&self, ctx: &TaskCtx, out: &mut [f64]) -> Result<(), String> {
+        let frame = ctx
+            .images
+            .and_then(|i| i.0.get(&self.camera))
+            .ok_or_else(|| {
+                format!(
+                    "camera \"{}\" was not rendered this step (image observations need a renderer attached to the env: modesuite_render::prepare, done by the CLI's env builders)",
+                    self.camera
+                )
+            })?;
+        let [h, w, c] = self.shape;
+        if (frame.height as usize, frame.width as usize) != (h, w) {
+            return Err(format!(
+                "camera \"{}\": a {}x{} frame, expected {w}x{h}",
+                self.camera, frame.width, frame.height
+            ));
+        }
+        for (k, px) in out.chunks_exact_mut(c).enumerate() {
+            let rgb = &frame.rgb[3 * k..3 * k + 3];
+            match self.channels {
+                CameraChannels::Rgb => {
+                    for (o, v) in px.iter_mut().zip(rgb) {
+                        *o = f64::from(*v) / 255.0;
+                    }
+                }
+                CameraChannels::Depth => px[0] = f64::from(frame.depth[k]),
+                CameraChannels::Rgbd => {
+                    for (o, v) in px.iter_mut().zip(rgb) {
+                        *o = f64::from(*v) / 255.0;
+                    }
+                    px[3] = f64::from(frame.depth[k]);
+                }
+            }
+        }
+        Ok(())
+    }
+    fn image(&self) -> Option<(&str, [usize; 3])> {
+        Some((&self.camera, self.shape))
+    }
+}
+
+/// Configures a `camera` term against the scene's cameras.
+pub fn camera_term(p: CameraObsDesc, cfg: &Configure) -> Result<Arc<dyn TaskTerm>, String> {
+    let (w, h) = *cfg.cameras.get(&p.camera).ok_or_else(|| {
+        format!(
+            "camera: \"{}\" is not a camera of the scene's render section (extensions[\"render\"].cameras): [{}]",
+            p.camera,
+            cfg.cameras.keys().cloned().collect::<Vec<_>>().join(", ")
+        )
+    })?;
+    Ok(Arc::new(CameraTerm {
+        shape: [h as usize, w as usize, p.channels.count()],
+        camera: p.camera,
+        channels: p.channels,
+    }))
 }
 
 /// Vector norm of a distance term.
@@ -472,6 +550,13 @@ pub fn roll_pitch(q: &UnitQuaternion<f64>) -> (f64, f64) {
 pub fn register_library(app: &mut SimApp) {
     use TermKind::*;
     let reg = register_task_term;
+    reg(
+        app,
+        "camera",
+        Observation,
+        "image of a camera of the render section (camera, channels: Rgb | Depth | Rgbd), row-major height x width x channels; RGB in [0, 1], depth in m",
+        factory(|p: CameraObsDesc, cfg| camera_term(p, cfg)),
+    );
     reg(
         app,
         "distance",
