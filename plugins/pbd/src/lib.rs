@@ -66,6 +66,7 @@ pub mod bench;
 mod cloth;
 pub mod coupling;
 mod error;
+mod lanes;
 mod material;
 mod mesh;
 pub mod plugin;
