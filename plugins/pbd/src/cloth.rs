@@ -990,6 +990,14 @@ impl Cloth {
             .ok_or_else(|| PbdError::Unknown(format!("attachment {}", id.0)))
     }
 
+    /// Chooses the AVX2 or the baseline kernels (tests: both give the same bits); AVX2 only
+    /// where the machine has it. Returns whether AVX2 is used.
+    #[cfg(test)]
+    pub(crate) fn use_avx2(&mut self, on: bool) -> bool {
+        self.avx2 = on && lanes::have_avx2();
+        self.avx2
+    }
+
     /// Recomputes the packed per-constraint rows for substep length `h` if stale.
     fn refresh_caches(&mut self, h: f64) {
         if self.cache_h == h {
@@ -1453,20 +1461,18 @@ impl Cloth {
             for f in &self.frames {
                 self.frame_now.push(interpolate(&f.prev, &f.target, frac));
             }
-            if s == 0 {
-                // predict (damping before gravity so that the static equilibrium is exact); the
-                // later substeps predict in the velocity pass of the substep before
-                lanes::predict(
-                    self.avx2,
-                    &mut self.x,
-                    &mut self.v,
-                    &mut self.prev,
-                    &self.inv_mass,
-                    damp,
-                    g4 * h,
-                    h,
-                );
-            }
+            // velocities of the substep before (if any), then predict, in one pass
+            lanes::advance(
+                self.avx2,
+                &mut self.x,
+                &mut self.v,
+                &mut self.prev,
+                &self.inv_mass,
+                (s > 0).then_some(1.0 / h),
+                damp,
+                g4 * h,
+                h,
+            );
             // kinematic pins
             for a in &self.attachments {
                 if a.kinematic {
@@ -1545,23 +1551,9 @@ impl Cloth {
                     }
                 }
             }
-            // velocities, and the prediction of the next substep
-            if s + 1 < ns {
-                lanes::velocities_predict(
-                    self.avx2,
-                    &mut self.x,
-                    &mut self.v,
-                    &mut self.prev,
-                    &self.inv_mass,
-                    1.0 / h,
-                    damp,
-                    g4 * h,
-                    h,
-                );
-            } else {
-                lanes::velocities(self.avx2, &self.x, &mut self.v, &self.prev, 1.0 / h);
-            }
         }
+        // velocities of the last substep (the others are computed by `advance`)
+        lanes::velocities(self.avx2, &self.x, &mut self.v, &self.prev, 1.0 / h);
         for ((x, v), (p, u)) in self
             .x
             .iter()

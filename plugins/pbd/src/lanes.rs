@@ -217,6 +217,7 @@ macro_rules! dispatch {
     ($(#[$m:meta])* fn $name:ident / $avx:ident => $body:ident($($arg:ident: $ty:ty),*)) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2")]
+        #[allow(clippy::too_many_arguments)]
         fn $avx($($arg: $ty),*) {
             $body($($arg),*)
         }
@@ -365,38 +366,6 @@ dispatch! {
 }
 
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn predict_body(
-    x: &mut [P4],
-    v: &mut [P4],
-    prev: &mut [P4],
-    inv_mass: &[f64],
-    damp: f64,
-    gh: P4,
-    h: f64,
-) {
-    let n = x.len();
-    let (v, prev, inv_mass) = (&mut v[..n], &mut prev[..n], &inv_mass[..n]);
-    for i in 0..n {
-        let xi = x[i];
-        prev[i] = xi;
-        if inv_mass[i] > 0.0 {
-            let vi = v[i] * damp + gh;
-            v[i] = vi;
-            x[i] = xi + vi * h;
-        }
-    }
-}
-
-dispatch! {
-    /// Start of a substep: `prev = x`, and for free particles `v = v damp + g h`, `x += v h`.
-    #[allow(clippy::too_many_arguments)]
-    fn predict / predict_avx2 => predict_body(
-        x: &mut [P4], v: &mut [P4], prev: &mut [P4], inv_mass: &[f64], damp: f64, gh: P4, h: f64
-    )
-}
-
-#[inline(always)]
 fn velocities_body(x: &[P4], v: &mut [P4], prev: &[P4], inv_h: f64) {
     let n = x.len();
     let (v, prev) = (&mut v[..n], &prev[..n]);
@@ -412,12 +381,12 @@ dispatch! {
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn velocities_predict_body(
+fn advance_body(
     x: &mut [P4],
     v: &mut [P4],
     prev: &mut [P4],
     inv_mass: &[f64],
-    inv_h: f64,
+    inv_h: Option<f64>,
     damp: f64,
     gh: P4,
     h: f64,
@@ -426,9 +395,13 @@ fn velocities_predict_body(
     let (v, prev, inv_mass) = (&mut v[..n], &mut prev[..n], &inv_mass[..n]);
     for i in 0..n {
         let xi = x[i];
-        let mut vi = (xi - prev[i]) * inv_h;
+        let mut vi = match inv_h {
+            Some(k) => (xi - prev[i]) * k,
+            None => v[i],
+        };
         prev[i] = xi;
         if inv_mass[i] > 0.0 {
+            // damping before gravity so that the static equilibrium is exact
             vi = vi * damp + gh;
             x[i] = xi + vi * h;
         }
@@ -437,12 +410,13 @@ fn velocities_predict_body(
 }
 
 dispatch! {
-    /// [`velocities`] of one substep fused with [`predict`] of the next (one pass over the
-    /// particles instead of two; the same arithmetic per particle).
+    /// Start of a substep: with `inv_h = Some(1 / h)` first the velocities of the substep before,
+    /// `v = (x - prev) / h` (one pass over the particles instead of two); then `prev = x`, and for
+    /// free particles `v = v damp + g h`, `x += v h`.
     #[allow(clippy::too_many_arguments)]
-    fn velocities_predict / velocities_predict_avx2 => velocities_predict_body(
-        x: &mut [P4], v: &mut [P4], prev: &mut [P4], inv_mass: &[f64], inv_h: f64, damp: f64,
-        gh: P4, h: f64
+    fn advance / advance_avx2 => advance_body(
+        x: &mut [P4], v: &mut [P4], prev: &mut [P4], inv_mass: &[f64], inv_h: Option<f64>,
+        damp: f64, gh: P4, h: f64
     )
 }
 
