@@ -22,6 +22,7 @@
 
 use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::error::PbdError;
+use crate::lanes::{self, BendRow, DistRow, OnceRows, P4};
 use crate::material::{ClothMaterial, SolverSettings, TetherMetric};
 use crate::mesh;
 use crate::selfcollide::SelfCollision;
@@ -169,8 +170,13 @@ pub struct Cloth {
     inv_mass_free: Vec<f64>,
     /// `(n)` inverse masses used by the solver (0 for pinned particles), 1/kg.
     inv_mass: Vec<f64>,
-    /// `(n, 3)` scratch: positions at the start of the substep, m.
-    prev: Vec<Vector3<f64>>,
+    /// `(n)` working copies of the positions and velocities during a step (the layout of the
+    /// kernels in [`lanes`]), and the positions at the start of the substep, m and m/s.
+    x: Vec<P4>,
+    v: Vec<P4>,
+    prev: Vec<P4>,
+    /// Whether the AVX2 versions of the kernels run (same results, see [`lanes`]).
+    avx2: bool,
     /// `(n, 3)` scratch: positions / velocities at the start of the step (rollback).
     save_pos: Vec<Vector3<f64>>,
     save_vel: Vec<Vector3<f64>>,
@@ -188,8 +194,10 @@ pub struct Cloth {
     dist_rest: Vec<f64>,
     dist_alpha: Vec<f64>,
     dist_lambda: Vec<f64>,
-    /// `(d)` packed solver rows derived from the above for the substep length `cache_h`.
+    /// `(d)` packed solver rows derived from the above for the substep length `cache_h`, and
+    /// the same rows in batches of four per colour for the first iteration.
     dist_rows: Vec<DistRow>,
+    dist_once: OnceRows,
     /// End index of each colour in the distance arrays (constraints of one colour share no
     /// particle, so they are processed four at a time).
     dist_colour_end: Vec<usize>,
@@ -200,7 +208,7 @@ pub struct Cloth {
     bend_idx: Vec<[u32; 4]>,
     bend_k: Vec<[f64; 4]>,
     bend_alpha: Vec<f64>,
-    bend_lambda: Vec<Vector3<f64>>,
+    bend_lambda: Vec<P4>,
     /// `(b)` packed solver rows derived from the above for the substep length `cache_h`.
     bend_rows: Vec<BendRow>,
     /// Substep length the caches were computed for, s (NaN: stale).
@@ -235,11 +243,11 @@ pub struct Cloth {
     /// Particle of each contact.
     c_particle: Vec<u32>,
     /// `(c, 3)` plane point at the start of the step, world frame, m (it moves with `c_vel`).
-    c_point: Vec<Vector3<f64>>,
+    c_point: Vec<P4>,
     /// `(c, 3)` unit outward normal, world frame.
-    c_normal: Vec<Vector3<f64>>,
+    c_normal: Vec<P4>,
     /// `(c, 3)` collider surface velocity, world frame, m/s.
-    c_vel: Vec<Vector3<f64>>,
+    c_vel: Vec<P4>,
     /// `(c)` combined friction coefficient.
     c_mu: Vec<f64>,
     /// `(c)` rigid body id (`u32::MAX`: none).
@@ -247,22 +255,22 @@ pub struct Cloth {
     /// Normal correction accumulated in the current substep, m.
     c_dn: Vec<f64>,
     /// Impulse applied on the particle over the step, N s.
-    c_impulse: Vec<Vector3<f64>>,
+    c_impulse: Vec<P4>,
     query_buf: Vec<PointContact>,
     // ---- rigid contacts of mesh-edge midpoints (keep edges from cutting collider corners)
     /// Mesh edge index, contact point m, normal, surface velocity m/s, body, impulse N s.
     e_edge: Vec<u32>,
-    e_point: Vec<Vector3<f64>>,
-    e_normal: Vec<Vector3<f64>>,
-    e_vel: Vec<Vector3<f64>>,
+    e_point: Vec<P4>,
+    e_normal: Vec<P4>,
+    e_vel: Vec<P4>,
     e_body: Vec<u32>,
-    e_impulse: Vec<Vector3<f64>>,
+    e_impulse: Vec<P4>,
     /// Friction coefficient and normal correction of the current substep, m.
     e_mu: Vec<f64>,
     e_dn: Vec<f64>,
     /// `(n, 3)` position where each particle's colliders were last queried, m, and `(n)` how
     /// far it may move from there before they are queried again, m.
-    guard_origin: Vec<Vector3<f64>>,
+    guard_origin: Vec<P4>,
     guard_radius: Vec<f64>,
     /// `(n + 1)` scratch: start of each particle's contacts in the contact arrays.
     contact_start: Vec<u32>,
@@ -478,7 +486,10 @@ impl Cloth {
             mass: masses.to_vec(),
             inv_mass_free: inv.clone(),
             inv_mass: inv,
-            prev: positions.to_vec(),
+            x: positions.iter().map(P4::from_v).collect(),
+            v: vec![P4::ZERO; n],
+            prev: positions.iter().map(P4::from_v).collect(),
+            avx2: lanes::have_avx2(),
             save_pos: positions.to_vec(),
             save_vel: vec![Vector3::zeros(); n],
             triangles: triangles.to_vec(),
@@ -486,6 +497,7 @@ impl Cloth {
             edge_rest: Vec::new(),
             dist_lambda: vec![0.0; dist_idx.len()],
             dist_rows: Vec::new(),
+            dist_once: OnceRows::default(),
             dist_colour_end,
             dist_idx,
             dist_rest,
@@ -493,7 +505,7 @@ impl Cloth {
             bend_idx: border.iter().map(|&k| bends[k].0).collect(),
             bend_k: border.iter().map(|&k| bends[k].1).collect(),
             bend_alpha: border.iter().map(|&k| bends[k].2).collect(),
-            bend_lambda: vec![Vector3::zeros(); bends.len()],
+            bend_lambda: vec![P4::ZERO; bends.len()],
             bend_rows: Vec::new(),
             cache_h: f64::NAN,
             tether_rows: Vec::new(),
@@ -523,7 +535,7 @@ impl Cloth {
             e_mu: Vec::new(),
             e_dn: Vec::new(),
             contact_start: vec![0; n + 1],
-            guard_origin: positions.to_vec(),
+            guard_origin: positions.iter().map(P4::from_v).collect(),
             guard_radius: vec![0.0; n],
             selfc: SelfCollision::new(positions, triangles),
             groups: BTreeMap::new(),
@@ -1003,6 +1015,14 @@ impl Cloth {
             .ok_or_else(|| PbdError::Unknown(format!("attachment {}", id.0)))
     }
 
+    /// Chooses the AVX2 or the baseline kernels (tests: both give the same bits); AVX2 only
+    /// where the machine has it. Returns whether AVX2 is used.
+    #[cfg(test)]
+    pub(crate) fn use_avx2(&mut self, on: bool) -> bool {
+        self.avx2 = on && lanes::have_avx2();
+        self.avx2
+    }
+
     /// Recomputes the packed per-constraint rows for substep length `h` if stale.
     fn refresh_caches(&mut self, h: f64) {
         if self.cache_h == h {
@@ -1046,6 +1066,7 @@ impl Cloth {
                 inv_denom,
             });
         }
+        self.dist_once = OnceRows::build(&self.dist_rows, &self.dist_colour_end);
         self.cache_h = h;
     }
 
@@ -1221,21 +1242,21 @@ impl Cloth {
                 self.steps += 1;
                 // reactions: rigid contacts
                 for c in 0..self.c_particle.len() {
-                    let imp = self.c_impulse[c];
+                    let imp = self.c_impulse[c].to_v();
                     if self.c_body[c] != u32::MAX && imp != Vector3::zeros() {
                         reactions.push(Reaction {
                             body: self.c_body[c],
-                            point: self.c_point[c],
+                            point: self.c_point[c].to_v(),
                             impulse: -imp,
                         });
                     }
                 }
                 for c in 0..self.e_edge.len() {
-                    let imp = self.e_impulse[c];
+                    let imp = self.e_impulse[c].to_v();
                     if self.e_body[c] != u32::MAX && imp != Vector3::zeros() {
                         reactions.push(Reaction {
                             body: self.e_body[c],
-                            point: self.e_point[c],
+                            point: self.e_point[c].to_v(),
                             impulse: -imp,
                         });
                     }
@@ -1293,13 +1314,14 @@ impl Cloth {
                 return Err(PbdError::NonFiniteContact { particle: i });
             }
             self.c_particle.push(i as u32);
-            self.c_point.push(c.point - c.velocity * t_query);
-            self.c_normal.push(c.normal / nn);
-            self.c_vel.push(c.velocity);
+            self.c_point
+                .push(P4::from_v(&(c.point - c.velocity * t_query)));
+            self.c_normal.push(P4::from_v(&(c.normal / nn)));
+            self.c_vel.push(P4::from_v(&c.velocity));
             self.c_mu.push((self.material.friction * c.friction).sqrt());
             self.c_body.push(c.body);
             self.c_dn.push(0.0);
-            self.c_impulse.push(Vector3::zeros());
+            self.c_impulse.push(P4::ZERO);
         }
         Ok(())
     }
@@ -1310,17 +1332,16 @@ impl Cloth {
     /// planes are enforced before the substep ends.
     fn requery_moved(&mut self, query: &dyn ContactQuery, t_start: f64) -> Result<(), PbdError> {
         let half = 0.5 * self.material.thickness;
-        for i in 0..self.pos.len() {
+        for i in 0..self.x.len() {
             let g = self.guard_radius[i];
-            if self.inv_mass[i] == 0.0
-                || (self.pos[i] - self.guard_origin[i]).norm_squared() <= g * g
+            if self.inv_mass[i] == 0.0 || (self.x[i] - self.guard_origin[i]).norm_squared() <= g * g
             {
                 continue;
             }
             let from = self.prev[i];
-            let r = half + (self.pos[i] - from).norm() + self.settings.contact_margin;
+            let r = half + (self.x[i] - from).norm() + self.settings.contact_margin;
             self.query_buf.clear();
-            query.contacts_near(&from, r, &mut self.query_buf);
+            query.contacts_near(&from.to_v(), r, &mut self.query_buf);
             self.push_queried(i, t_start)?;
             self.guard_origin[i] = from;
             self.guard_radius[i] = r - half;
@@ -1351,7 +1372,7 @@ impl Cloth {
             self.query_buf.clear();
             query.contacts_near(&self.pos[i], r, &mut self.query_buf);
             self.push_queried(i, 0.0)?;
-            self.guard_origin[i] = self.pos[i];
+            self.guard_origin[i] = P4::from_v(&self.pos[i]);
             self.guard_radius[i] = r - half;
         }
         let m = self.c_particle.len();
@@ -1377,7 +1398,7 @@ impl Cloth {
             ca.clone().any(|i| {
                 cb.clone().any(|j| {
                     self.c_body[i] == self.c_body[j]
-                        && self.c_normal[i].dot(&self.c_normal[j]) < 0.985
+                        && self.c_normal[i].dot(self.c_normal[j]) < 0.985
                 })
             })
         };
@@ -1405,16 +1426,16 @@ impl Cloth {
                     return Err(PbdError::NonFiniteContact { particle: a });
                 }
                 self.e_edge.push(k as u32);
-                self.e_point.push(c.point);
-                self.e_normal.push(c.normal / nn);
-                self.e_vel.push(c.velocity);
+                self.e_point.push(P4::from_v(&c.point));
+                self.e_normal.push(P4::from_v(&(c.normal / nn)));
+                self.e_vel.push(P4::from_v(&c.velocity));
                 self.e_body.push(c.body);
                 self.e_mu
                     .push((self.material.friction * c.friction.max(0.0)).sqrt());
             }
         }
         self.e_impulse.clear();
-        self.e_impulse.resize(self.e_edge.len(), Vector3::zeros());
+        self.e_impulse.resize(self.e_edge.len(), P4::ZERO);
         self.e_dn.clear();
         self.e_dn.resize(self.e_edge.len(), 0.0);
         Ok(())
@@ -1448,6 +1469,16 @@ impl Cloth {
         let damp = 1.0 / (1.0 + self.material.damping * h);
         let half = 0.5 * self.material.thickness;
         let att_alpha = self.settings.attachment_compliance * inv_h2;
+        for ((x, v), (p, u)) in self
+            .x
+            .iter_mut()
+            .zip(&mut self.v)
+            .zip(self.pos.iter().zip(&self.vel))
+        {
+            *x = P4::from_v(p);
+            *v = P4::from_v(u);
+        }
+        let g4 = P4::from_v(gravity);
         for s in 0..ns {
             let t_end = (s + 1) as f64 * h;
             let frac = (s + 1) as f64 / ns as f64;
@@ -1455,37 +1486,37 @@ impl Cloth {
             for f in &self.frames {
                 self.frame_now.push(interpolate(&f.prev, &f.target, frac));
             }
-            // predict
-            for i in 0..self.pos.len() {
-                self.prev[i] = self.pos[i];
-                if self.inv_mass[i] > 0.0 {
-                    // damping before gravity so that the static equilibrium is exact
-                    let v = self.vel[i] * damp + gravity * h;
-                    self.vel[i] = v;
-                    self.pos[i] += v * h;
-                }
-            }
+            // velocities of the substep before (if any), then predict, in one pass
+            lanes::advance(
+                self.avx2,
+                &mut self.x,
+                &mut self.v,
+                &mut self.prev,
+                &self.inv_mass,
+                (s > 0).then_some(1.0 / h),
+                damp,
+                g4 * h,
+                h,
+            );
             // kinematic pins
             for a in &self.attachments {
                 if a.kinematic {
                     for (k, &p) in a.particles.iter().enumerate() {
-                        self.pos[p as usize] = match a.frame {
+                        self.x[p as usize] = P4::from_v(&match a.frame {
                             None => a.local[k],
                             Some(f) => {
                                 self.frame_now[f as usize]
                                     .transform_point(&Point3::from(a.local[k]))
                                     .coords
                             }
-                        };
+                        });
                     }
                 }
             }
             self.e_dn.iter_mut().for_each(|d| *d = 0.0);
             if self.settings.iterations > 1 {
                 self.dist_lambda.iter_mut().for_each(|l| *l = 0.0);
-                self.bend_lambda
-                    .iter_mut()
-                    .for_each(|l| *l = Vector3::zeros());
+                self.bend_lambda.iter_mut().for_each(|l| *l = P4::ZERO);
             }
             self.c_dn.iter_mut().for_each(|d| *d = 0.0);
             for a in &mut self.attachments {
@@ -1494,17 +1525,17 @@ impl Cloth {
             for _ in 0..self.settings.iterations {
                 if self.settings.iterations == 1 {
                     // multipliers start at zero and are not needed afterwards
-                    solve_distances_once(&mut self.pos, &self.dist_rows, &self.dist_colour_end);
-                    solve_bending_once(&mut self.pos, &self.bend_rows);
+                    lanes::distances_once(self.avx2, &mut self.x, &self.dist_once);
+                    lanes::bending_once(self.avx2, &mut self.x, &self.bend_rows);
                 } else {
-                    solve_distances(&mut self.pos, &self.dist_rows, &mut self.dist_lambda);
-                    solve_bending(&mut self.pos, &self.bend_rows, &mut self.bend_lambda);
+                    solve_distances(&mut self.x, &self.dist_rows, &mut self.dist_lambda);
+                    solve_bending(&mut self.x, &self.bend_rows, &mut self.bend_lambda);
                 }
                 self.solve_attachments(att_alpha, h);
                 self.solve_tethers();
                 if self_pairs > 0 {
                     self.selfc.solve(
-                        &mut self.pos,
+                        &mut self.x,
                         &self.inv_mass,
                         &self.triangles,
                         self.material.thickness,
@@ -1539,17 +1570,23 @@ impl Cloth {
                         let pose = self.frame_now[f as usize];
                         for (k, &p) in a.particles.iter().enumerate() {
                             a.local[k] = pose
-                                .inverse_transform_point(&Point3::from(self.pos[p as usize]))
+                                .inverse_transform_point(&Point3::from(self.x[p as usize].to_v()))
                                 .coords;
                         }
                     }
                 }
             }
-            // velocities
-            let inv_h = 1.0 / h;
-            for i in 0..self.pos.len() {
-                self.vel[i] = (self.pos[i] - self.prev[i]) * inv_h;
-            }
+        }
+        // velocities of the last substep (the others are computed by `advance`)
+        lanes::velocities(self.avx2, &self.x, &mut self.v, &self.prev, 1.0 / h);
+        for ((x, v), (p, u)) in self
+            .x
+            .iter()
+            .zip(&self.v)
+            .zip(self.pos.iter_mut().zip(&mut self.vel))
+        {
+            *p = x.to_v();
+            *u = v.to_v();
         }
         let max_speed = self.vel.iter().map(|v| v.norm()).fold(0.0, f64::max);
         Ok(StepStats {
@@ -1576,7 +1613,7 @@ impl Cloth {
                     continue;
                 }
                 let target = pose.transform_point(&Point3::from(a.local[k])).coords;
-                let c = self.pos[p as usize] - target;
+                let c = self.x[p as usize].to_v() - target;
                 let dl = (-c - a.lambda[k] * alpha_t) / (w + alpha_t);
                 a.cand[k] = a.lambda[k] + dl;
                 total += a.cand[k];
@@ -1587,25 +1624,19 @@ impl Cloth {
             for (k, &p) in a.particles.iter().enumerate() {
                 let nl = a.cand[k] * scale;
                 let w = self.inv_mass[p as usize];
-                self.pos[p as usize] += (nl - a.lambda[k]) * w;
+                self.x[p as usize] += P4::from_v(&((nl - a.lambda[k]) * w));
                 a.lambda[k] = nl;
             }
         }
     }
 
     /// Long-range attachments: a particle farther from its (kinematic, never moving) anchor than
-    /// the tether length is moved back onto the sphere. Branch-free over the compact rows (whether a
-    /// tether is active is data dependent and mispredicted often); anchors have zero inverse mass,
-    /// so rows touch only their own particle and their order does not matter.
+    /// the tether length is moved back onto the sphere. Branch-free over the compact rows, four at
+    /// a time ([`lanes::tethers`]; whether a tether is active is data dependent and mispredicted
+    /// often); anchors have zero inverse mass, so rows touch only their own particle and their
+    /// order does not matter.
     fn solve_tethers(&mut self) {
-        let pos = &mut self.pos;
-        for &(i, a, len) in &self.tether_rows {
-            let d = pos[i as usize] - pos[a as usize];
-            let l = d.norm();
-            let c = (l - len).max(0.0);
-            let s = if c > 0.0 { c / l } else { 0.0 };
-            pos[i as usize] -= d * s;
-        }
+        lanes::tethers(self.avx2, &mut self.x, &self.tether_rows);
     }
 
     /// Tethers anchored at grasped particles ([`SolverSettings::grasp_tethers`]), "follow the
@@ -1629,10 +1660,10 @@ impl Cloth {
     /// without).
     fn solve_grasp_tethers(&mut self) {
         for &(i, par, len) in &self.grasp_tether_rows {
-            let d = self.pos[i as usize] - self.pos[par as usize];
+            let d = self.x[i as usize] - self.x[par as usize];
             let l = d.norm();
             if l > len {
-                self.pos[i as usize] -= d * ((l - len) / l);
+                self.x[i as usize] -= d * ((l - len) / l);
             }
         }
     }
@@ -1646,12 +1677,12 @@ impl Cloth {
             let (wa, wb) = (self.inv_mass[a], self.inv_mass[b]);
             let n = self.e_normal[c];
             let plane = self.e_point[c] + self.e_vel[c] * t_end;
-            let mid = (self.pos[a] + self.pos[b]) * 0.5;
-            let gap = n.dot(&(mid - plane)) - half;
+            let mid = (self.x[a] + self.x[b]) * 0.5;
+            let gap = n.dot(mid - plane) - half;
             if gap < 0.0 {
                 let lam = -gap / (0.25 * (wa + wb));
-                self.pos[a] += n * (0.5 * wa * lam);
-                self.pos[b] += n * (0.5 * wb * lam);
+                self.x[a] += n * (0.5 * wa * lam);
+                self.x[b] += n * (0.5 * wb * lam);
                 let moved = 0.5 * lam * (self.mass[a] * wa + self.mass[b] * wb);
                 self.e_impulse[c] += n * (moved / h);
                 self.e_dn[c] -= gap;
@@ -1667,9 +1698,9 @@ impl Cloth {
             }
             let n = self.c_normal[c];
             let plane = self.c_point[c] + self.c_vel[c] * t_end;
-            let gap = n.dot(&(self.pos[p] - plane)) - half;
+            let gap = n.dot(self.x[p] - plane) - half;
             if gap < 0.0 {
-                self.pos[p] -= n * gap;
+                self.x[p] -= n * gap;
                 self.c_dn[c] -= gap;
             }
         }
@@ -1684,9 +1715,9 @@ impl Cloth {
             }
             let n = self.c_normal[c];
             let plane = self.c_point[c] + self.c_vel[c] * t_end;
-            let gap = n.dot(&(self.pos[p] - plane)) - half;
+            let gap = n.dot(self.x[p] - plane) - half;
             if gap < 0.0 {
-                self.pos[p] -= n * gap;
+                self.x[p] -= n * gap;
                 self.c_impulse[c] -= n * (gap * self.mass[p] / h);
             }
         }
@@ -1702,17 +1733,17 @@ impl Cloth {
             let (a, b) = (a as usize, b as usize);
             let (wa, wb) = (self.inv_mass[a], self.inv_mass[b]);
             let n = self.e_normal[c];
-            let mid = (self.pos[a] + self.pos[b]) * 0.5;
+            let mid = (self.x[a] + self.x[b]) * 0.5;
             let mid_prev = (self.prev[a] + self.prev[b]) * 0.5;
             let rel = (mid - mid_prev) - self.e_vel[c] * h;
-            let tang = rel - n * n.dot(&rel);
+            let tang = rel - n * n.dot(rel);
             let tl = tang.norm();
             let lim = self.e_mu[c] * dn;
             let target = if tl <= lim { -tang } else { -tang * (lim / tl) };
             // move the midpoint by `target`: dx_i = w_i / 2 * target / ((w_a + w_b) / 4)
             let s = 2.0 / (wa + wb);
-            self.pos[a] += target * (wa * s);
-            self.pos[b] += target * (wb * s);
+            self.x[a] += target * (wa * s);
+            self.x[b] += target * (wb * s);
             let moved = (self.mass[a] * wa + self.mass[b] * wb) * s;
             self.e_impulse[c] += target * (moved / h);
         }
@@ -1726,12 +1757,12 @@ impl Cloth {
             }
             let p = self.c_particle[c] as usize;
             let n = self.c_normal[c];
-            let rel = (self.pos[p] - self.prev[p]) - self.c_vel[c] * h;
-            let tang = rel - n * n.dot(&rel);
+            let rel = (self.x[p] - self.prev[p]) - self.c_vel[c] * h;
+            let tang = rel - n * n.dot(rel);
             let tl = tang.norm();
             let lim = self.c_mu[c] * dn;
             let corr = if tl <= lim { -tang } else { -tang * (lim / tl) };
-            self.pos[p] += corr;
+            self.x[p] += corr;
             self.c_impulse[c] += (n * dn + corr) * (self.mass[p] / h);
         }
     }
@@ -2022,40 +2053,10 @@ fn check_positions(positions: &[Vector3<f64>]) -> Result<(), PbdError> {
     Ok(())
 }
 
-/// A distance constraint prepared for one substep length.
-#[derive(Debug, Clone, Copy)]
-struct DistRow {
-    a: u32,
-    b: u32,
-    /// Rest length, m.
-    rest: f64,
-    /// `alpha / h^2`, 1/kg.
-    at: f64,
-    /// `1 / (w_a + w_b + alpha / h^2)`, kg.
-    inv_denom: f64,
-    /// `w_a / (w_a + w_b + alpha / h^2)` and the same for b.
-    ka: f64,
-    kb: f64,
-}
-
-/// An isometric bending hinge prepared for one substep length.
-#[derive(Debug, Clone, Copy)]
-struct BendRow {
-    ids: [u32; 4],
-    /// Coefficients `K_i`.
-    k: [f64; 4],
-    /// `w_i K_i / (sum_j w_j K_j^2 + alpha / h^2)`.
-    wk: [f64; 4],
-    /// `alpha / h^2`.
-    at: f64,
-    /// `1 / (sum_j w_j K_j^2 + alpha / h^2)`.
-    inv_denom: f64,
-}
-
 /// One Gauss-Seidel sweep over distance constraints (XPBD, Macklin et al. 2016, eq. 18):
 /// `dlambda = (-C - alpha~ lambda) / (w_a + w_b + alpha~)`, `dx_a = w_a dlambda n`.
 #[inline(never)]
-fn solve_distances(pos: &mut [Vector3<f64>], rows: &[DistRow], lambda: &mut [f64]) {
+fn solve_distances(pos: &mut [P4], rows: &[DistRow], lambda: &mut [f64]) {
     for (r, lam) in rows.iter().zip(lambda.iter_mut()) {
         let (a, b) = (r.a as usize, r.b as usize);
         let d = pos[a] - pos[b];
@@ -2082,74 +2083,17 @@ fn colour_ends(colours: &[u32]) -> Vec<usize> {
     ends
 }
 
-/// [`solve_distances`] for the first iteration of a substep (all multipliers zero). Constraints
-/// of one colour share no particle, so four of them are gathered, computed and scattered
-/// together (instruction-level parallelism, SIMD arithmetic); the result is bit-identical to
-/// processing them one by one.
-#[inline(never)]
-fn solve_distances_once(pos: &mut [Vector3<f64>], rows: &[DistRow], colour_end: &[usize]) {
-    let mut start = 0;
-    for &end in colour_end {
-        let mut k = start;
-        while k + 4 <= end {
-            let r = &rows[k..k + 4];
-            let mut d = [Vector3::zeros(); 4];
-            for j in 0..4 {
-                d[j] = pos[r[j].a as usize] - pos[r[j].b as usize];
-            }
-            let mut s = [0.0; 4];
-            for j in 0..4 {
-                let l = d[j].norm();
-                let v = (r[j].rest - l) / l;
-                s[j] = if l < 1e-12 { 0.0 } else { v };
-            }
-            for j in 0..4 {
-                pos[r[j].a as usize] += d[j] * (s[j] * r[j].ka);
-                pos[r[j].b as usize] -= d[j] * (s[j] * r[j].kb);
-            }
-            k += 4;
-        }
-        for r in &rows[k..end] {
-            let (a, b) = (r.a as usize, r.b as usize);
-            let d = pos[a] - pos[b];
-            let l = d.norm();
-            if l < 1e-12 {
-                continue;
-            }
-            let s = (r.rest - l) / l;
-            pos[a] += d * (s * r.ka);
-            pos[b] -= d * (s * r.kb);
-        }
-        start = end;
-    }
-}
-
 /// One sweep over isometric bending hinges. The constraint `C = sum_i K_i x_i` is linear, so its
 /// XPBD update is exact in one projection: `dlambda = (-C - alpha~ lambda) / (sum_i w_i K_i^2 +
 /// alpha~)` (a 3-vector), `dx_i = w_i K_i dlambda`.
 #[inline(never)]
-fn solve_bending(pos: &mut [Vector3<f64>], rows: &[BendRow], lambda: &mut [Vector3<f64>]) {
+fn solve_bending(pos: &mut [P4], rows: &[BendRow], lambda: &mut [P4]) {
     for (r, lam) in rows.iter().zip(lambda.iter_mut()) {
         let [i0, i1, i2, i3] = r.ids.map(|i| i as usize);
         let k = r.k;
         let c = pos[i0] * k[0] + pos[i1] * k[1] + pos[i2] * k[2] + pos[i3] * k[3];
         let num = -c - *lam * r.at;
         *lam += num * r.inv_denom;
-        pos[i0] += num * r.wk[0];
-        pos[i1] += num * r.wk[1];
-        pos[i2] += num * r.wk[2];
-        pos[i3] += num * r.wk[3];
-    }
-}
-
-/// [`solve_bending`] for the first iteration of a substep (multipliers zero). (Batching four
-/// hinges of a colour, as for distances, measured slower.)
-#[inline(never)]
-fn solve_bending_once(pos: &mut [Vector3<f64>], rows: &[BendRow]) {
-    for r in rows {
-        let [i0, i1, i2, i3] = r.ids.map(|i| i as usize);
-        let k = r.k;
-        let num = -(pos[i0] * k[0] + pos[i1] * k[1] + pos[i2] * k[2] + pos[i3] * k[3]);
         pos[i0] += num * r.wk[0];
         pos[i1] += num * r.wk[1];
         pos[i2] += num * r.wk[2];

@@ -33,9 +33,16 @@
 //!   hanging-chain test reaches 1e-13 relative error in f64; profiles show the time going to
 //!   gather/scatter and sqrt/division latency rather than memory bandwidth (a 1600-particle
 //!   sheet's positions are 38 KB), which f32 would only partly help.
+//! * **Padded particles and AVX2 copies of the hot loops** (`lanes.rs`): during a step each
+//!   particle is `[x, y, z, 0]`, 32-byte aligned (one 256-bit load or store), and the distance,
+//!   bending, tether, prediction and velocity loops are compiled a second time with AVX2
+//!   enabled, chosen at run time. Same bits either way (no fused multiply-adds; tested), same
+//!   bits as the earlier `Vector3<f64>` arrays (nalgebra's order of operations). Measured
+//!   1.5x on the reference sheet (2026-11-26, BENCHMARKS.md); an SoA layout with gathers was
+//!   not needed: rows of one colour are gathered as whole particles.
 //! * **Gauss-Seidel in colour order**, one iteration per substep by default (8 substeps per
 //!   1/60 s step): constraints of one colour share no particle, so distance constraints are
-//!   processed four at a time. Under-iterated XPBD is always softer than converged, never
+//!   processed four at a time (one vector square root and one vector division for four rows). Under-iterated XPBD is always softer than converged, never
 //!   stiffer (tested). Stiff bending needs many more substeps to converge (the drape test uses
 //!   80 per frame).
 //! * **Straight tethers only from kinematic pins**: a force-limited attachment must feel the
@@ -66,6 +73,7 @@ pub mod bench;
 mod cloth;
 pub mod coupling;
 mod error;
+mod lanes;
 mod material;
 mod mesh;
 pub mod plugin;

@@ -10,6 +10,7 @@
 //! other as long as they approach by less than `margin` per step. Edge-edge crossings are not
 //! tested.
 
+use crate::lanes::P4;
 use nalgebra::Vector3;
 
 /// Self-collision candidate data and scratch (rebuilt every step).
@@ -220,37 +221,31 @@ impl SelfCollision {
     }
 
     /// One projection sweep over the candidates.
-    pub(crate) fn solve(
-        &self,
-        pos: &mut [Vector3<f64>],
-        w: &[f64],
-        tris: &[[u32; 3]],
-        thickness: f64,
-    ) {
+    pub(crate) fn solve(&self, pos: &mut [P4], w: &[f64], tris: &[[u32; 3]], thickness: f64) {
         for k in 0..self.pt_particle.len() {
             let p = self.pt_particle[k] as usize;
             let [ia, ib, ic] = tris[self.pt_tri[k] as usize].map(|v| v as usize);
             let (a, b, c, x) = (pos[ia], pos[ib], pos[ic], pos[p]);
             let e1 = b - a;
             let e2 = c - a;
-            let nrm = e1.cross(&e2);
+            let nrm = e1.cross(e2);
             let nl = nrm.norm();
             if nl < 1e-14 {
                 continue;
             }
             let side = self.pt_side[k];
             let n = nrm * (side / nl);
-            let d = n.dot(&(x - a));
+            let d = n.dot(x - a);
             if d >= thickness {
                 continue;
             }
             // barycentric coordinates of the projection
             let q = x - a;
-            let d00 = e1.dot(&e1);
-            let d01 = e1.dot(&e2);
-            let d11 = e2.dot(&e2);
-            let d20 = q.dot(&e1);
-            let d21 = q.dot(&e2);
+            let d00 = e1.dot(e1);
+            let d01 = e1.dot(e2);
+            let d11 = e2.dot(e2);
+            let d20 = q.dot(e1);
+            let d21 = q.dot(e2);
             let den = d00 * d11 - d01 * d01;
             let v = (d11 * d20 - d01 * d21) / den;
             let ww = (d00 * d21 - d01 * d20) / den;

@@ -530,3 +530,29 @@ fn driven_particles_move_only_in_their_window_and_bad_drives_are_rejected() {
     assert!(c.drive_particles(&[p], v, 1.0, 0.5).is_err());
     assert!(c.drive_particles(&[999], v, 0.0, 1.0).is_err());
 }
+
+#[test]
+fn avx2_and_baseline_kernels_give_the_same_bits() {
+    // the reference sheet swinging onto the cube: distances, bending, tethers, contacts and
+    // self-collision, 120 steps
+    let cfg = crate::bench::BenchConfig::reference(true);
+    let (mut a, cube) = crate::bench::reference_scene(&cfg).unwrap();
+    let mut b = a.clone();
+    let simd = a.use_avx2(true);
+    assert!(!b.use_avx2(false));
+    let mut r = Vec::new();
+    for _ in 0..120 {
+        a.step(crate::bench::REFERENCE_DT, &gravity(), &cube, &mut r)
+            .unwrap();
+        b.step(crate::bench::REFERENCE_DT, &gravity(), &cube, &mut r)
+            .unwrap();
+    }
+    let (sa, sb) = (a.get_state(), b.get_state());
+    assert!(
+        sa.iter().zip(&sb).all(|(x, y)| x.to_bits() == y.to_bits()),
+        "AVX2 ({simd}) and baseline kernels differ"
+    );
+    if !simd {
+        eprintln!("no AVX2 on this machine: only the baseline kernels ran");
+    }
+}
