@@ -295,22 +295,21 @@ fn route_legs_with_bad_hand_goals_are_refused_with_the_leg() {
         (
             r#"hand_at: "handle", hand_tolerance: 0.015"#,
             r#"hand_at: "handel", hand_tolerance: 0.015"#,
-            r#"route[4].hand_at: "handel" is not a point or target"#,
+            r#"extensions["task"].route[4].hand_at = "handel": a point or target of the task"#,
         ),
         (
             "hand_tolerance: 0.015",
             "hand_tolerance: -0.015",
-            "route[4].hand_tolerance = -0.015: a positive number",
+            r#"extensions["task"].route[4].hand_tolerance = -0.015: a positive number"#,
         ),
         (
             "hand_rpy: (180.0, -50.0, 0.0)",
             "hand_rpy: (180.0, inf, 0.0)",
-            "route[0].hand_rpy = (180, inf, 0): finite",
+            r#"extensions["task"].route[0].hand_rpy = (180, inf, 0): finite"#,
         ),
     ] {
-        let mut env = Env::new(task_app("uncover", &task_text("uncover", from, to)));
-        env.reset(Some(0));
-        let e = make_policy(PolicyKind::Scripted, &env).err().unwrap();
+        // Refused when the scene compiles (so `modesuite validate` reports it).
+        let e = scene_error_in("uncover", &task_text("uncover", from, to));
         println!("{e}");
         assert!(e.contains(expect), "{e}");
     }

@@ -10,7 +10,7 @@ use modesuite_engine::{Env, RigidContext, SimSettings, Space};
 use modesuite_robots::{ArmMode, BaseMode, GripperMode, RobotObservation, RobotRuntime, Robots};
 use nalgebra::{UnitQuaternion, Vector2, Vector3};
 
-use crate::desc::RouteStep;
+use crate::desc::{RouteStep, TaskDesc};
 use crate::manager::{Task, TaskPoints};
 
 /// Which policy.
@@ -93,6 +93,50 @@ impl Policy for Random {
     }
 }
 
+/// Checks the `route` legs of a task section: `Err((field path under the section, value,
+/// what is valid))`. Run when the scene compiles, so `modesuite validate` reports them.
+pub fn check_route(desc: &TaskDesc) -> Result<(), (String, String, String)> {
+    for (i, l) in desc.route.iter().enumerate() {
+        if let Some((r, p, y)) = l.hand_rpy {
+            if !(r.is_finite() && p.is_finite() && y.is_finite()) {
+                return Err((
+                    format!("route[{i}].hand_rpy"),
+                    format!("({r}, {p}, {y})"),
+                    "finite roll, pitch, yaw in degrees".into(),
+                ));
+            }
+        }
+        for (field, v) in [
+            ("speed", l.speed),
+            ("hand_speed", l.hand_speed),
+            ("tolerance", l.tolerance),
+            ("hand_tolerance", l.hand_tolerance),
+        ] {
+            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err((
+                    format!("route[{i}].{field}"),
+                    v.to_string(),
+                    "a positive number (m/s or m)".into(),
+                ));
+            }
+        }
+        if let Some(n) = &l.hand_at {
+            if !desc.points.contains_key(n) && !desc.targets.contains_key(n) {
+                return Err((
+                    format!("route[{i}].hand_at"),
+                    format!("\"{n}\""),
+                    format!(
+                        "a point or target of the task (points {:?}, targets {:?})",
+                        desc.points.keys().collect::<Vec<_>>(),
+                        desc.targets.keys().collect::<Vec<_>>()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Makes a policy for `env`. `scripted` needs a task with an expert that supports the
 /// robot's action modes; errors say which modes it supports.
 pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, String> {
@@ -156,37 +200,6 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                             l.hand.is_none() && l.hand_at.is_none() && l.hand_rpy.is_none()
                         }),
                     )?;
-                    let desc = &task.model.desc;
-                    for (i, l) in route.iter().enumerate() {
-                        if let Some((r, p, y)) = l.hand_rpy {
-                            if !(r.is_finite() && p.is_finite() && y.is_finite()) {
-                                return Err(format!(
-                                    "task.route[{i}].hand_rpy = ({r}, {p}, {y}): finite roll, pitch, yaw in degrees"
-                                ));
-                            }
-                        }
-                        for (field, v) in [
-                            ("speed", l.speed),
-                            ("hand_speed", l.hand_speed),
-                            ("tolerance", l.tolerance),
-                            ("hand_tolerance", l.hand_tolerance),
-                        ] {
-                            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
-                                return Err(format!(
-                                    "task.route[{i}].{field} = {v}: a positive number (m/s or m)"
-                                ));
-                            }
-                        }
-                        if let Some(n) = &l.hand_at {
-                            if !desc.points.contains_key(n) && !desc.targets.contains_key(n) {
-                                return Err(format!(
-                                    "task.route[{i}].hand_at: \"{n}\" is not a point or target of the task (points {:?}, targets {:?})",
-                                    desc.points.keys().collect::<Vec<_>>(),
-                                    desc.targets.keys().collect::<Vec<_>>()
-                                ));
-                            }
-                        }
-                    }
                     Ok(Box::new(RouteExpert {
                         robot,
                         route,

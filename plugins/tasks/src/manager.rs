@@ -652,6 +652,8 @@ impl SceneSection for TaskSection {
                 "a group named \"policy\" (the env's observation)",
             ));
         }
+        crate::expert::check_route(&desc)
+            .map_err(|(field, value, msg)| serr(&format!("{path}.{field}"), value, msg))?;
         for (n, e) in &desc.events {
             check_event(&format!("{path}.events[\"{n}\"]"), e, &cfg, None)?;
         }
