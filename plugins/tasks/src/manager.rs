@@ -252,6 +252,32 @@ fn scene_cameras(ctx: &SectionCompileContext) -> Result<BTreeMap<String, (u32, u
         .unwrap_or_default())
 }
 
+/// Checks that an event's `object` is in the scene.
+fn check_object(epath: &str, object: &str, cfg: &Configure) -> Result<(), SceneError> {
+    cfg.object(object)
+        .map_err(|m| serr(&format!("{epath}.object"), object, m))
+}
+
+/// Checks a `(lo, hi)` range: finite, `lo <= hi`, `lo >= 0` (`lo > 0` when `positive`).
+fn check_range(
+    path: &str,
+    (lo, hi): (f64, f64),
+    positive: bool,
+    (low, high): (&str, &str),
+    unit: &str,
+) -> Result<(), SceneError> {
+    let low_ok = if positive { lo > 0.0 } else { lo >= 0.0 };
+    if lo.is_finite() && hi.is_finite() && low_ok && lo <= hi {
+        return Ok(());
+    }
+    let op = if positive { "<" } else { "<=" };
+    Err(serr(
+        path,
+        format!("({lo}, {hi})"),
+        format!("finite ({low}, {high}) with 0 {op} {low} <= {high}{unit}"),
+    ))
+}
+
 /// Checks an event of the task section (`wrapper`: the `Startup`/`Interval` it is inside).
 fn check_event(
     epath: &str,
@@ -270,20 +296,17 @@ fn check_event(
             }
         }
         EventDesc::Friction { object, range } => {
-            cfg.object(object)
-                .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
-            let (lo, hi) = *range;
-            if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi) {
-                return Err(serr(
-                    &format!("{epath}.range"),
-                    format!("{range:?}"),
-                    "finite (lowest, highest) with 0 <= lowest <= highest",
-                ));
-            }
+            check_object(epath, object, cfg)?;
+            check_range(
+                &format!("{epath}.range"),
+                *range,
+                false,
+                ("lowest", "highest"),
+                "",
+            )?;
         }
         EventDesc::ObjectOffset { object, xy } => {
-            cfg.object(object)
-                .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+            check_object(epath, object, cfg)?;
             if !(xy.is_finite() && *xy >= 0.0) {
                 return Err(serr(
                     &format!("{epath}.xy"),
@@ -296,19 +319,17 @@ fn check_event(
             object,
             youngs_modulus: (lo, hi),
         } => {
-            cfg.object(object)
-                .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
-            if !(lo.is_finite() && hi.is_finite() && 0.0 < *lo && lo <= hi) {
-                return Err(serr(
-                    &format!("{epath}.youngs_modulus"),
-                    format!("({lo}, {hi})"),
-                    "finite (lowest, highest) with 0 < lowest <= highest, Pa",
-                ));
-            }
+            check_object(epath, object, cfg)?;
+            check_range(
+                &format!("{epath}.youngs_modulus"),
+                (*lo, *hi),
+                true,
+                ("lowest", "highest"),
+                ", Pa",
+            )?;
         }
         EventDesc::Push { object, velocity } => {
-            cfg.object(object)
-                .map_err(|m| serr(&format!("{epath}.object"), object.clone(), m))?;
+            check_object(epath, object, cfg)?;
             let (x, y, z) = *velocity;
             if ![x, y, z].iter().all(|v| v.is_finite() && *v >= 0.0) {
                 return Err(serr(
@@ -335,13 +356,13 @@ fn check_event(
                 every: (lo, hi), ..
             } = e
             {
-                if !(lo.is_finite() && hi.is_finite() && 0.0 < *lo && lo <= hi) {
-                    return Err(serr(
-                        &format!("{epath}.every"),
-                        format!("({lo}, {hi})"),
-                        "finite (shortest, longest) with 0 < shortest <= longest, s",
-                    ));
-                }
+                check_range(
+                    &format!("{epath}.every"),
+                    (*lo, *hi),
+                    true,
+                    ("shortest", "longest"),
+                    ", s",
+                )?;
                 if matches!(
                     **inner,
                     EventDesc::RobotPose { .. } | EventDesc::ObjectOffset { .. }
