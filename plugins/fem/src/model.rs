@@ -3,7 +3,7 @@
 
 use crate::element::{barycentric_gradients, shape_gradients, QuadraticMesh, NQ, QUAD_POINTS};
 use crate::error::FemError;
-use crate::material::{project_psd, Material, StableNeoHookean};
+use crate::material::{Material, StableNeoHookean};
 use crate::sparse::BlockPattern;
 use nalgebra::{Matrix3, SMatrix, Vector3};
 
@@ -235,7 +235,7 @@ impl SolidModel {
 
     /// Elastic energy, gradient `dPsi/dx` (N, written into `grad`) and, if `hess` is given, the
     /// stiffness matrix (block values overwritten); with `project`, each quadrature point's
-    /// `dP/dF` is first made positive semi-definite ([`project_psd`]). With
+    /// `dP/dF` is first made positive semi-definite ([`StableNeoHookean::project_hessian`]). With
     /// `damping = Some((x_prev, c))` the strain-rate damping potential of
     /// [`SolidModel::damping_qp`] (relative to the shape `x_prev`) is added to all three.
     pub fn eval(
@@ -274,7 +274,11 @@ impl SolidModel {
                 });
                 if hess.is_some() {
                     let (mut psi, mut p, h) = self.energy.eval(&f);
-                    let mut h = if project { project_psd(&h) } else { h };
+                    let mut h = if project {
+                        self.energy.project_hessian(&f, &h)
+                    } else {
+                        h
+                    };
                     if let (Some(fp), Some((_, c))) = (fp, damping) {
                         let (ed, pd, hd) = self.damping_qp(&f, &fp, c, true);
                         psi += ed;
