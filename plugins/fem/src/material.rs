@@ -316,6 +316,11 @@ impl StableNeoHookean {
             scaling[(i, jj)] += c * sig[k];
             scaling[(jj, i)] += c * sig[k];
         }
+        // positive definite by Sylvester's criterion (the usual case): nothing to clamp
+        let minor2 = scaling[(0, 0)] * scaling[(1, 1)] - scaling[(0, 1)] * scaling[(0, 1)];
+        if scaling[(0, 0)] > 0.0 && minor2 > 0.0 && scaling.determinant() > 0.0 {
+            return Some(out);
+        }
         let eig = scaling.try_symmetric_eigen(f64::EPSILON, 100)?;
         for m in 0..3 {
             let lam = eig.eigenvalues[m];
