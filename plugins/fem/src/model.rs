@@ -268,7 +268,7 @@ impl SolidModel {
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> KernelStats {
         let Some(hess) = hess else {
-            return self.eval_gradient(x, grad, damping);
+            return self.eval_gradient(x, grad, damping, true);
         };
         grad.iter_mut().for_each(|g| *g = Vector3::zeros());
         hess.iter_mut().for_each(|b| *b = Matrix3::zeros());
@@ -345,12 +345,24 @@ impl SolidModel {
         s
     }
 
-    /// [`SolidModel::eval`] without the Hessian: energy and gradient only.
+    /// The elastic gradient of [`SolidModel::eval`] (N, written into `grad`) without the energy
+    /// (no logarithm) and without the Hessian; returns the number of inverted quadrature points.
+    pub fn gradient(
+        &self,
+        x: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        damping: Option<(&[Vector3<f64>], f64)>,
+    ) -> usize {
+        self.eval_gradient(x, grad, damping, false).inverted
+    }
+
+    /// [`SolidModel::eval`] without the Hessian: gradient, and the energy when `with_energy`.
     fn eval_gradient(
         &self,
         x: &[Vector3<f64>],
         grad: &mut [Vector3<f64>],
         damping: Option<(&[Vector3<f64>], f64)>,
+        with_energy: bool,
     ) -> KernelStats {
         grad.iter_mut().for_each(|g| *g = Vector3::zeros());
         let mut s = KernelStats::default();
@@ -365,11 +377,15 @@ impl SolidModel {
                 if f.determinant() <= 0.0 {
                     s.inverted += 1;
                 }
-                s.energy += w * self.energy.energy(&f);
+                if with_energy {
+                    s.energy += w * self.energy.energy(&f);
+                }
                 let mut p = self.energy.pk1(&f);
                 if let Some((xpe, c)) = &xpe {
                     let (ed, pd, _) = self.damping_qp(&f, &interpolate(xpe, g), *c, false);
-                    s.energy += w * ed;
+                    if with_energy {
+                        s.energy += w * ed;
+                    }
                     p += pd;
                 }
                 for a in 0..10 {

@@ -59,7 +59,7 @@ use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::element::{shape_values, NQ};
 use crate::error::FemError;
 use crate::material::Material;
-use crate::model::{KernelStats, SolidModel};
+use crate::model::SolidModel;
 use crate::sparse::{dot, pcg, ProfileCholesky};
 use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::sync::Arc;
@@ -1256,18 +1256,24 @@ impl FemSolid {
         e
     }
 
-    /// Elastic (and stiffness-damping) gradient and Hessian at the current positions, scaled by
-    /// this solid's Young's modulus over the model's.
+    /// Elastic (and stiffness-damping) gradient and, if asked, Hessian at the current positions,
+    /// scaled by this solid's Young's modulus over the model's; returns the number of inverted
+    /// quadrature points.
     fn eval_elastic(
         &self,
         grad: &mut [Vector3<f64>],
         mut hess: Option<&mut [Matrix3<f64>]>,
         project: bool,
         damping: Option<(&[Vector3<f64>], f64)>,
-    ) -> KernelStats {
-        let ks = self
-            .model
-            .eval(&self.pos, grad, hess.as_deref_mut(), project, damping);
+    ) -> usize {
+        let inverted = match hess.as_deref_mut() {
+            Some(h) => {
+                self.model
+                    .eval(&self.pos, grad, Some(h), project, damping)
+                    .inverted
+            }
+            None => self.model.gradient(&self.pos, grad, damping),
+        };
         let k = self.stiffness_scale;
         if k != 1.0 {
             grad.iter_mut().for_each(|g| *g *= k);
@@ -1275,7 +1281,7 @@ impl FemSolid {
                 h.iter_mut().for_each(|b| *b *= k);
             }
         }
-        ks
+        inverted
     }
 
     /// Total incremental potential at `x`.
@@ -1664,7 +1670,7 @@ impl FemSolid {
         let n = self.n_nodes();
         let mut egrad = std::mem::take(&mut self.egrad);
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-        let ks = self.eval_elastic(&mut egrad, None, false, damping);
+        let inverted = self.eval_elastic(&mut egrad, None, false, damping);
         let mut grad = std::mem::take(&mut self.grad);
         for i in 0..n {
             let m = self.model.mass[i];
@@ -1682,7 +1688,7 @@ impl FemSolid {
         self.pos = pos;
         self.egrad = egrad;
         self.grad = grad;
-        ks.inverted
+        inverted
     }
 
     fn refresh_grasp_anchors(&mut self) {
