@@ -1574,6 +1574,9 @@ impl FemSolid {
         let c_mass_pre = p.c_mass + p.c_damp;
         let mut prev_step = f64::INFINITY;
         let mut refactored = false;
+        // potential at `self.pos` once a line search has evaluated it there (the accepted trial is
+        // bitwise the new position)
+        let mut e_pos: Option<f64> = None;
         for _ in 0..max_iter {
             stats.factorizations += self.ensure_precond(c_mass_pre, c_stiff_pre)?;
             stats.newton_iterations += 1;
@@ -1624,24 +1627,31 @@ impl FemSolid {
             let mut alpha = 1.0;
             if step_max > tol_x {
                 let mut trial = std::mem::take(&mut self.trial);
-                let e0 = self.potential(p, &self.pos);
+                let e0 = match e_pos {
+                    Some(e) => e,
+                    None => self.potential(p, &self.pos),
+                };
                 let slope = -dot(&r, &delta);
-                let mut accepted = false;
+                let mut accepted = None;
                 for _ in 0..30 {
                     for i in 0..n {
                         trial[i] = self.pos[i] + delta[i] * alpha;
                     }
                     let e1 = self.potential(p, &trial);
                     if e1.is_finite() && e1 <= e0 + 1e-4 * alpha * slope + 1e-12 * e0.abs() {
-                        accepted = true;
+                        accepted = Some(e1);
                         break;
                     }
                     alpha *= 0.5;
                 }
                 self.trial = trial;
-                if !accepted {
+                if accepted.is_none() {
                     alpha = 0.0;
                 }
+                // rejected: the position stays and so does its potential
+                e_pos = accepted.or(Some(e0));
+            } else {
+                e_pos = None;
             }
             for i in 0..n {
                 self.pos[i] += delta[i] * alpha;
