@@ -234,11 +234,11 @@ impl ProfileCholesky {
                 let mut s = a[si + j - fi];
                 let ri = &a[si + k0 - fi..si + j - fi];
                 let rj = &a[sj + k0 - fj..sj + j - fj];
-                s -= dot_f64(ri, rj);
+                s -= ri.iter().zip(rj).map(|(x, y)| x * y).sum::<f64>();
                 a[si + j - fi] = s / a[sj + j - fj];
             }
             let row = &a[si..si + i - fi];
-            let d = a[si + i - fi] - dot_f64(row, row);
+            let d = a[si + i - fi] - row.iter().map(|x| x * x).sum::<f64>();
             if d.is_nan() || d <= 0.0 || d.is_infinite() {
                 return Err(FemError::NotPositiveDefinite(format!(
                     "pivot {d:e} at dof {} of node {}",
@@ -277,7 +277,7 @@ impl ProfileCholesky {
             let fi = self.first[i] as usize;
             let si = self.start[i];
             let row = &self.vals[si..si + i - fi];
-            let s = dot_f64(row, &y[fi..i]);
+            let s: f64 = row.iter().zip(&y[fi..i]).map(|(a, b)| a * b).sum();
             y[i] = (y[i] - s) / self.vals[si + i - fi];
         }
         for i in (0..n).rev() {
@@ -294,26 +294,6 @@ impl ProfileCholesky {
             b[old as usize] = Vector3::new(y[3 * new], y[3 * new + 1], y[3 * new + 2]);
         }
     }
-}
-
-/// Dot product of two equally long slices in eight interleaved partial sums (so that it
-/// vectorises), added in a fixed order: deterministic for given lengths, but not rounded like a
-/// left-to-right sum.
-#[inline]
-fn dot_f64(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0f64; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for k in 0..8 {
-            acc[k] += x[k] * y[k];
-        }
-    }
-    let mut tail = 0.0;
-    for (x, y) in ra.iter().zip(rb) {
-        tail += x * y;
-    }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
 /// Dot product of two block vectors (fixed summation order).
