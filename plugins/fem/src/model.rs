@@ -3,7 +3,7 @@
 
 use crate::element::{barycentric_gradients, shape_gradients, QuadraticMesh, NQ, QUAD_POINTS};
 use crate::error::FemError;
-use crate::material::{project_psd, Material, StableNeoHookean};
+use crate::material::{Material, StableNeoHookean};
 use crate::sparse::BlockPattern;
 use nalgebra::{Matrix3, SMatrix, Vector3};
 
@@ -48,6 +48,27 @@ pub struct KernelStats {
     pub energy: f64,
     /// Quadrature points with `det F <= 0`.
     pub inverted: usize,
+}
+
+/// The positions of an element's 10 nodes.
+#[inline]
+fn gather(x: &[Vector3<f64>], el: &[u32; 10]) -> [Vector3<f64>; 10] {
+    let mut xe = [Vector3::zeros(); 10];
+    for a in 0..10 {
+        xe[a] = x[el[a] as usize];
+    }
+    xe
+}
+
+/// Deformation gradient `sum_a x_a g_a^T` from an element's node positions and the shape-function
+/// gradients of one quadrature point.
+#[inline]
+fn interpolate(xe: &[Vector3<f64>; 10], g: &[Vector3<f64>; 10]) -> Matrix3<f64> {
+    let mut f = Matrix3::zeros();
+    for a in 0..10 {
+        f += xe[a] * g[a].transpose();
+    }
+    f
 }
 
 impl SolidModel {
@@ -162,13 +183,10 @@ impl SolidModel {
     /// Deformation gradient at quadrature point `q` of element `e` for positions `x`.
     #[inline]
     pub fn deformation_gradient(&self, e: usize, q: usize, x: &[Vector3<f64>]) -> Matrix3<f64> {
-        let el = &self.mesh.elements[e];
-        let g = &self.qp_grad[e * NQ + q];
-        let mut f = Matrix3::zeros();
-        for a in 0..10 {
-            f += x[el[a] as usize] * g[a].transpose();
-        }
-        f
+        interpolate(
+            &gather(x, &self.mesh.elements[e]),
+            &self.qp_grad[e * NQ + q],
+        )
     }
 
     /// Elastic energy only (J) and inverted quadrature-point count; with `damping`, the
@@ -179,17 +197,20 @@ impl SolidModel {
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> KernelStats {
         let mut s = KernelStats::default();
-        for e in 0..self.n_elements() {
+        for (e, el) in self.mesh.elements.iter().enumerate() {
+            let xe = gather(x, el);
+            let xpe = damping.map(|(xp, c)| (gather(xp, el), c));
             for q in 0..NQ {
-                let f = self.deformation_gradient(e, q, x);
+                let g = &self.qp_grad[e * NQ + q];
+                let f = interpolate(&xe, g);
                 if f.determinant() <= 0.0 {
                     s.inverted += 1;
                 }
                 let w = self.qp_weight[e * NQ + q];
                 s.energy += w * self.energy.energy(&f);
-                if let Some((xp, c)) = damping {
-                    let fp = self.deformation_gradient(e, q, xp);
-                    s.energy += w * self.damping_qp(&f, &fp, c, false).0;
+                if let Some((xpe, c)) = &xpe {
+                    let fp = interpolate(xpe, g);
+                    s.energy += w * self.damping_qp(&f, &fp, *c, false).0;
                 }
             }
         }
@@ -235,109 +256,144 @@ impl SolidModel {
 
     /// Elastic energy, gradient `dPsi/dx` (N, written into `grad`) and, if `hess` is given, the
     /// stiffness matrix (block values overwritten); with `project`, each quadrature point's
-    /// `dP/dF` is first made positive semi-definite ([`project_psd`]). With
+    /// `dP/dF` is first made positive semi-definite ([`StableNeoHookean::project_hessian`]). With
     /// `damping = Some((x_prev, c))` the strain-rate damping potential of
     /// [`SolidModel::damping_qp`] (relative to the shape `x_prev`) is added to all three.
     pub fn eval(
         &self,
         x: &[Vector3<f64>],
         grad: &mut [Vector3<f64>],
-        mut hess: Option<&mut [Matrix3<f64>]>,
+        hess: Option<&mut [Matrix3<f64>]>,
         project: bool,
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> KernelStats {
+        let Some(hess) = hess else {
+            return self.eval_gradient(x, grad, damping, true);
+        };
         grad.iter_mut().for_each(|g| *g = Vector3::zeros());
-        if let Some(h) = hess.as_deref_mut() {
-            h.iter_mut().for_each(|b| *b = Matrix3::zeros());
-        }
+        hess.iter_mut().for_each(|b| *b = Matrix3::zeros());
         let mut s = KernelStats::default();
         for (e, el) in self.mesh.elements.iter().enumerate() {
-            let xe = el.map(|n| x[n as usize]);
+            let xe = gather(x, el);
+            let xpe = damping.map(|(xp, c)| (gather(xp, el), c));
             let mut ge = [Vector3::<f64>::zeros(); 10];
             let mut ke = [[Matrix3::<f64>::zeros(); 10]; 10];
             for q in 0..NQ {
                 let g = &self.qp_grad[e * NQ + q];
                 let w = self.qp_weight[e * NQ + q];
-                let mut f = Matrix3::zeros();
-                for a in 0..10 {
-                    f += xe[a] * g[a].transpose();
-                }
+                let f = interpolate(&xe, g);
                 if f.determinant() <= 0.0 {
                     s.inverted += 1;
                 }
-                let fp = damping.map(|(xp, _)| {
-                    let mut fp = Matrix3::zeros();
-                    for a in 0..10 {
-                        fp += xp[el[a] as usize] * g[a].transpose();
-                    }
-                    fp
-                });
-                if hess.is_some() {
-                    let (mut psi, mut p, h) = self.energy.eval(&f);
-                    let mut h = if project { project_psd(&h) } else { h };
-                    if let (Some(fp), Some((_, c))) = (fp, damping) {
-                        let (ed, pd, hd) = self.damping_qp(&f, &fp, c, true);
-                        psi += ed;
-                        p += pd;
-                        h += hd.expect("requested");
-                    }
-                    s.energy += w * psi;
-                    let h = h * w;
-                    for a in 0..10 {
-                        ge[a] += p * g[a] * w;
-                    }
-                    // hb[b] (9x3): hb[(r, k)] = sum_l H[(r, k + 3 l)] g_b[l]
-                    let mut hb = [SMatrix::<f64, 9, 3>::zeros(); 10];
-                    for b in 0..10 {
-                        for k in 0..3 {
-                            let col = h.column(k) * g[b][0]
-                                + h.column(k + 3) * g[b][1]
-                                + h.column(k + 6) * g[b][2];
-                            hb[b].set_column(k, &col);
-                        }
-                    }
-                    for a in 0..10 {
-                        let ga = g[a];
-                        for b in a..10 {
-                            let m = &hb[b];
-                            let mut blk = Matrix3::zeros();
-                            for i in 0..3 {
-                                for k in 0..3 {
-                                    blk[(i, k)] = ga[0] * m[(i, k)]
-                                        + ga[1] * m[(i + 3, k)]
-                                        + ga[2] * m[(i + 6, k)];
-                                }
-                            }
-                            ke[a][b] += blk;
-                        }
-                    }
+                let (mut psi, mut p, h) = self.energy.eval(&f);
+                let mut h = if project {
+                    self.energy.project_hessian(&f, &h)
                 } else {
-                    s.energy += w * self.energy.energy(&f);
-                    let mut p = self.energy.pk1(&f);
-                    if let (Some(fp), Some((_, c))) = (fp, damping) {
-                        let (ed, pd, _) = self.damping_qp(&f, &fp, c, false);
-                        s.energy += w * ed;
-                        p += pd;
+                    h
+                };
+                if let Some((xpe, c)) = &xpe {
+                    let (ed, pd, hd) = self.damping_qp(&f, &interpolate(xpe, g), *c, true);
+                    psi += ed;
+                    p += pd;
+                    h += hd.expect("requested");
+                }
+                s.energy += w * psi;
+                let h = h * w;
+                for a in 0..10 {
+                    ge[a] += p * g[a] * w;
+                }
+                // hb[b] (9x3): hb[(r, k)] = sum_l H[(r, k + 3 l)] g_b[l]
+                let mut hb = [SMatrix::<f64, 9, 3>::zeros(); 10];
+                for b in 0..10 {
+                    for k in 0..3 {
+                        let col = h.column(k) * g[b][0]
+                            + h.column(k + 3) * g[b][1]
+                            + h.column(k + 6) * g[b][2];
+                        hb[b].set_column(k, &col);
                     }
-                    for a in 0..10 {
-                        ge[a] += p * g[a] * w;
+                }
+                for a in 0..10 {
+                    let ga = g[a];
+                    for b in a..10 {
+                        let m = &hb[b];
+                        let mut blk = Matrix3::zeros();
+                        for i in 0..3 {
+                            for k in 0..3 {
+                                blk[(i, k)] = ga[0] * m[(i, k)]
+                                    + ga[1] * m[(i + 3, k)]
+                                    + ga[2] * m[(i + 6, k)];
+                            }
+                        }
+                        ke[a][b] += blk;
                     }
                 }
             }
             for a in 0..10 {
                 grad[el[a] as usize] += ge[a];
             }
-            if let Some(h) = hess.as_deref_mut() {
-                let map = &self.elem_blocks[e * 100..e * 100 + 100];
-                for a in 0..10 {
-                    for b in a..10 {
-                        let blk = ke[a][b];
-                        h[map[10 * a + b] as usize] += blk;
-                        if b != a {
-                            h[map[10 * b + a] as usize] += blk.transpose();
-                        }
+            let map = &self.elem_blocks[e * 100..e * 100 + 100];
+            for a in 0..10 {
+                for b in a..10 {
+                    let blk = ke[a][b];
+                    hess[map[10 * a + b] as usize] += blk;
+                    if b != a {
+                        hess[map[10 * b + a] as usize] += blk.transpose();
                     }
                 }
+            }
+        }
+        s
+    }
+
+    /// The elastic gradient of [`SolidModel::eval`] (N, written into `grad`) without the energy
+    /// (no logarithm) and without the Hessian; returns the number of inverted quadrature points.
+    pub fn gradient(
+        &self,
+        x: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        damping: Option<(&[Vector3<f64>], f64)>,
+    ) -> usize {
+        self.eval_gradient(x, grad, damping, false).inverted
+    }
+
+    /// [`SolidModel::eval`] without the Hessian: gradient, and the energy when `with_energy`.
+    fn eval_gradient(
+        &self,
+        x: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        damping: Option<(&[Vector3<f64>], f64)>,
+        with_energy: bool,
+    ) -> KernelStats {
+        grad.iter_mut().for_each(|g| *g = Vector3::zeros());
+        let mut s = KernelStats::default();
+        for (e, el) in self.mesh.elements.iter().enumerate() {
+            let xe = gather(x, el);
+            let xpe = damping.map(|(xp, c)| (gather(xp, el), c));
+            let mut ge = [Vector3::<f64>::zeros(); 10];
+            for q in 0..NQ {
+                let g = &self.qp_grad[e * NQ + q];
+                let w = self.qp_weight[e * NQ + q];
+                let f = interpolate(&xe, g);
+                if f.determinant() <= 0.0 {
+                    s.inverted += 1;
+                }
+                if with_energy {
+                    s.energy += w * self.energy.energy(&f);
+                }
+                let mut p = self.energy.pk1(&f);
+                if let Some((xpe, c)) = &xpe {
+                    let (ed, pd, _) = self.damping_qp(&f, &interpolate(xpe, g), *c, false);
+                    if with_energy {
+                        s.energy += w * ed;
+                    }
+                    p += pd;
+                }
+                for a in 0..10 {
+                    ge[a] += p * g[a] * w;
+                }
+            }
+            for a in 0..10 {
+                grad[el[a] as usize] += ge[a];
             }
         }
         s

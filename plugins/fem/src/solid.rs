@@ -59,7 +59,7 @@ use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::element::{shape_values, NQ};
 use crate::error::FemError;
 use crate::material::Material;
-use crate::model::{KernelStats, SolidModel};
+use crate::model::SolidModel;
 use crate::sparse::{dot, pcg, ProfileCholesky};
 use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::sync::Arc;
@@ -1256,18 +1256,24 @@ impl FemSolid {
         e
     }
 
-    /// Elastic (and stiffness-damping) gradient and Hessian at the current positions, scaled by
-    /// this solid's Young's modulus over the model's.
+    /// Elastic (and stiffness-damping) gradient and, if asked, Hessian at the current positions,
+    /// scaled by this solid's Young's modulus over the model's; returns the number of inverted
+    /// quadrature points.
     fn eval_elastic(
         &self,
         grad: &mut [Vector3<f64>],
         mut hess: Option<&mut [Matrix3<f64>]>,
         project: bool,
         damping: Option<(&[Vector3<f64>], f64)>,
-    ) -> KernelStats {
-        let ks = self
-            .model
-            .eval(&self.pos, grad, hess.as_deref_mut(), project, damping);
+    ) -> usize {
+        let inverted = match hess.as_deref_mut() {
+            Some(h) => {
+                self.model
+                    .eval(&self.pos, grad, Some(h), project, damping)
+                    .inverted
+            }
+            None => self.model.gradient(&self.pos, grad, damping),
+        };
         let k = self.stiffness_scale;
         if k != 1.0 {
             grad.iter_mut().for_each(|g| *g *= k);
@@ -1275,7 +1281,7 @@ impl FemSolid {
                 h.iter_mut().for_each(|b| *b *= k);
             }
         }
-        ks
+        inverted
     }
 
     /// Total incremental potential at `x`.
@@ -1568,6 +1574,9 @@ impl FemSolid {
         let c_mass_pre = p.c_mass + p.c_damp;
         let mut prev_step = f64::INFINITY;
         let mut refactored = false;
+        // potential at `self.pos` once a line search has evaluated it there (the accepted trial is
+        // bitwise the new position)
+        let mut e_pos: Option<f64> = None;
         for _ in 0..max_iter {
             stats.factorizations += self.ensure_precond(c_mass_pre, c_stiff_pre)?;
             stats.newton_iterations += 1;
@@ -1618,24 +1627,31 @@ impl FemSolid {
             let mut alpha = 1.0;
             if step_max > tol_x {
                 let mut trial = std::mem::take(&mut self.trial);
-                let e0 = self.potential(p, &self.pos);
+                let e0 = match e_pos {
+                    Some(e) => e,
+                    None => self.potential(p, &self.pos),
+                };
                 let slope = -dot(&r, &delta);
-                let mut accepted = false;
+                let mut accepted = None;
                 for _ in 0..30 {
                     for i in 0..n {
                         trial[i] = self.pos[i] + delta[i] * alpha;
                     }
                     let e1 = self.potential(p, &trial);
                     if e1.is_finite() && e1 <= e0 + 1e-4 * alpha * slope + 1e-12 * e0.abs() {
-                        accepted = true;
+                        accepted = Some(e1);
                         break;
                     }
                     alpha *= 0.5;
                 }
                 self.trial = trial;
-                if !accepted {
+                if accepted.is_none() {
                     alpha = 0.0;
                 }
+                // rejected: the position stays and so does its potential
+                e_pos = accepted.or(Some(e0));
+            } else {
+                e_pos = None;
             }
             for i in 0..n {
                 self.pos[i] += delta[i] * alpha;
@@ -1664,7 +1680,7 @@ impl FemSolid {
         let n = self.n_nodes();
         let mut egrad = std::mem::take(&mut self.egrad);
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-        let ks = self.eval_elastic(&mut egrad, None, false, damping);
+        let inverted = self.eval_elastic(&mut egrad, None, false, damping);
         let mut grad = std::mem::take(&mut self.grad);
         for i in 0..n {
             let m = self.model.mass[i];
@@ -1682,7 +1698,7 @@ impl FemSolid {
         self.pos = pos;
         self.egrad = egrad;
         self.grad = grad;
-        ks.inverted
+        inverted
     }
 
     fn refresh_grasp_anchors(&mut self) {
