@@ -137,6 +137,7 @@ fn observation_and_action_sizes_match_docs_tasks_md() {
         ("MoDe-Franka-Uncover-v0", 46, 10),
         ("MoDe-Spot-Uncover-v0", 44, 10),
         ("MoDe-Franka-Cover-v0", 46, 10),
+        ("MoDe-Spot-Cover-v0", 44, 10),
     ] {
         let env = make(id, None);
         let s = env.spaces();

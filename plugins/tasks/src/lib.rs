@@ -45,7 +45,7 @@ pub const TASKS: [&str; 8] = [
     "Curtain",
 ];
 /// The environments implemented so far (the others answer "not implemented yet").
-pub const IMPLEMENTED: [&str; 15] = [
+pub const IMPLEMENTED: [&str; 16] = [
     "MoDe-Franka-Place-v0",
     "MoDe-Spot-Place-v0",
     "MoDe-Franka-Curtain-v0",
@@ -61,6 +61,7 @@ pub const IMPLEMENTED: [&str; 15] = [
     "MoDe-Franka-Uncover-v0",
     "MoDe-Spot-Uncover-v0",
     "MoDe-Franka-Cover-v0",
+    "MoDe-Spot-Cover-v0",
 ];
 
 /// All 16 environment ids, robot-major.
@@ -195,6 +196,10 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     (
         "cover/franka.scene.ron",
         include_str!("../../../scenes/cover/franka.scene.ron"),
+    ),
+    (
+        "cover/spot.scene.ron",
+        include_str!("../../../scenes/cover/spot.scene.ron"),
     ),
 ];
 
