@@ -1066,6 +1066,19 @@ fn startup_events_hold_for_the_env_and_interval_events_run_on_time() {
         env.reset(Some(seed));
         friction(&env, "table")
     };
+    // A robot link by its `robot/link` name (checked when the event runs).
+    let link_text = place_with_events(
+        r#""grip": Friction(object: "robot/panda_leftfinger", range: (1.5, 1.5)), "bad": Friction(object: "robot/nope", range: (0.5, 0.5)),"#,
+    );
+    let mut env = Env::new(place_app(&link_text));
+    let (_, info) = env.reset(Some(0));
+    assert_eq!(friction(&env, "robot/panda_leftfinger"), 1.5);
+    let e = info.error.expect("an unknown link is refused at reset");
+    println!("{e}");
+    assert!(
+        e.contains("robot/nope") && e.contains("not a rigid body"),
+        "{e}"
+    );
     let (f0, f1) = (first(0), first(1));
     println!("a fresh env's table friction: first reset seed 0: {f0}, seed 1: {f1}");
     assert_eq!(f0, seen[0], "a function of the first reset's seed");

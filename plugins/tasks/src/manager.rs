@@ -252,8 +252,12 @@ fn scene_cameras(ctx: &SectionCompileContext) -> Result<BTreeMap<String, (u32, u
         .unwrap_or_default())
 }
 
-/// Checks that an event's `object` is in the scene.
+/// Checks that an event's `object` is in the scene; a robot link (`robot/link`, spawned by the
+/// robots section after the task compiles) is checked when the event runs.
 fn check_object(epath: &str, object: &str, cfg: &Configure) -> Result<(), SceneError> {
+    if object.contains('/') {
+        return Ok(());
+    }
     cfg.object(object)
         .map_err(|m| serr(&format!("{epath}.object"), object, m))
 }
