@@ -279,12 +279,11 @@ impl RigidContext {
         self.pending.push(r);
     }
 
-    /// Rebuilds the collision query structure from the colliders' current poses (done after
-    /// spawning and after every rapier step). Colliders attached to a body that was moved
-    /// outside a step (a reset's restore, a robot's start pose) are first put back on their
-    /// body: rapier itself moves them only at its next step, and until then queries and
-    /// cameras would see the old place.
-    pub fn refresh_queries(&mut self) {
+    /// After bodies were moved outside a step (spawning a robot in its start configuration, a
+    /// reset event's start pose): puts the colliders attached to them back on their bodies,
+    /// then [`RigidContext::refresh_queries`]. Rapier itself moves them only at its next step;
+    /// until then queries and cameras would see the old place.
+    pub fn bodies_moved(&mut self) {
         for (_, co) in self.colliders.iter_mut() {
             let Some(body) = co.parent().and_then(|b| self.bodies.get(b)) else {
                 continue;
@@ -297,6 +296,12 @@ impl RigidContext {
                 co.set_position(pos);
             }
         }
+        self.refresh_queries();
+    }
+
+    /// Rebuilds the collision query structure from the colliders' current poses (done after
+    /// every rapier step, where rapier has already moved the colliders with their bodies).
+    pub fn refresh_queries(&mut self) {
         self.query_leaves.clear();
         let mut aabbs = Vec::with_capacity(self.colliders.len());
         for (h, co) in self.colliders.iter() {

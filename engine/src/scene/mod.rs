@@ -882,7 +882,7 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
         section.handler.spawn(app, &section.compiled)?;
     }
     if let Some(mut rigid) = app.world.get_resource_mut::<crate::rigid::RigidContext>() {
-        rigid.refresh_queries();
+        rigid.bodies_moved();
     }
     Ok(())
 }

@@ -904,7 +904,7 @@ impl SceneSection for TaskSection {
             .groups
             .iter()
             .flat_map(|g| &g.terms)
-            .filter_map(|t| t.term.term.image().map(|(c, _)| c.to_string()))
+            .filter_map(|t| t.term.term.image().map(|(c, _, _)| c.to_string()))
             .collect();
         if !cameras.is_empty() {
             let mut requests = app
@@ -968,16 +968,11 @@ fn policy_space(g: &Group, dims: &Dims) -> Space {
     for t in &g.terms {
         match t.term.term.image() {
             None => run += t.term.term.dim(dims),
-            Some((camera, shape)) => {
+            Some((camera, channels, shape)) => {
                 flush(&mut run, &mut items);
-                let channels = match shape[2] {
-                    1 => "depth",
-                    3 => "rgb",
-                    _ => "rgbd",
-                };
                 let n: usize = shape.iter().product();
                 items.push((
-                    format!("{camera}_{channels}"),
+                    format!("{camera}_{}", channels.name()),
                     Space::Box {
                         low: vec![0.0; n],
                         high: vec![f32::INFINITY; n],
@@ -1577,11 +1572,12 @@ fn task_reset(
         }
     }
     if let Some(rigid) = ew.rigid.as_deref_mut() {
-        rigid.refresh_queries();
+        rigid.bodies_moved();
     }
 }
 
 /// Runs the interval events that are due at the start of this env step (before its physics).
+/// They move no body (friction, stiffness, velocities), so the rigid queries stay valid.
 fn task_interval_events(
     task: Option<Res<Task>>,
     mut state: Option<ResMut<TaskState>>,
@@ -1596,7 +1592,6 @@ fn task_interval_events(
         return;
     }
     let m = &task.model;
-    let mut fired = false;
     let intervals = m.events.iter().filter_map(|(n, e)| match e {
         EventDesc::Interval { every, .. } => Some((n, e, every)),
         _ => None,
@@ -1612,12 +1607,6 @@ fn task_interval_events(
         *next += gap;
         if *next <= clock.time {
             *next = clock.time + gap;
-        }
-        fired = true;
-    }
-    if fired {
-        if let Some(rigid) = ew.rigid.as_deref_mut() {
-            rigid.refresh_queries();
         }
     }
 }

@@ -175,9 +175,9 @@ pub trait TaskTerm: Send + Sync + 'static {
     fn dim(&self, dims: &Dims) -> usize;
     /// Writes `dim` values.
     fn evaluate(&self, ctx: &TaskCtx, out: &mut [f64]) -> Result<(), String>;
-    /// An image term: the camera it reads and its shape (height, width, channels); the task
-    /// requests the camera and the observation space gets an image box for it.
-    fn image(&self) -> Option<(&str, [usize; 3])> {
+    /// An image term: the camera it reads, its channels and its shape (height, width,
+    /// channels); the task requests the camera and the observation space gets an image box.
+    fn image(&self) -> Option<(&str, CameraChannels, [usize; 3])> {
         None
     }
 }
@@ -288,27 +288,22 @@ impl TaskTerm for CameraTerm {
                 self.camera, frame.width, frame.height
             ));
         }
+        let colour = self.channels != CameraChannels::Depth;
+        let depth = self.channels != CameraChannels::Rgb;
         for (k, px) in out.chunks_exact_mut(c).enumerate() {
-            let rgb = &frame.rgb[3 * k..3 * k + 3];
-            match self.channels {
-                CameraChannels::Rgb => {
-                    for (o, v) in px.iter_mut().zip(rgb) {
-                        *o = f64::from(*v) / 255.0;
-                    }
+            if colour {
+                for (o, v) in px.iter_mut().zip(&frame.rgb[3 * k..3 * k + 3]) {
+                    *o = f64::from(*v) / 255.0;
                 }
-                CameraChannels::Depth => px[0] = f64::from(frame.depth[k]),
-                CameraChannels::Rgbd => {
-                    for (o, v) in px.iter_mut().zip(rgb) {
-                        *o = f64::from(*v) / 255.0;
-                    }
-                    px[3] = f64::from(frame.depth[k]);
-                }
+            }
+            if depth {
+                px[c - 1] = f64::from(frame.depth[k]);
             }
         }
         Ok(())
     }
-    fn image(&self) -> Option<(&str, [usize; 3])> {
-        Some((&self.camera, self.shape))
+    fn image(&self) -> Option<(&str, CameraChannels, [usize; 3])> {
+        Some((&self.camera, self.channels, self.shape))
     }
 }
 
