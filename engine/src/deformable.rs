@@ -264,6 +264,9 @@ fn deformable_step<S: DeformableSolver>(
     let mut reactions: Vec<Reaction> = Vec::new();
     let mut empty = PluginStates::default();
     let mut buffer = Vec::new();
+    if let Some(r) = rigid.as_deref_mut() {
+        r.refresh_queries();
+    }
     for body in &mut ctx.bodies {
         if let (Some(terms), Ok(object)) = (terms.as_deref(), names.get(body.entity)) {
             let states = states.as_deref_mut().unwrap_or(&mut empty);

@@ -133,6 +133,10 @@ pub struct RigidContext {
     /// Query acceleration: a BVH over the colliders' current AABBs, leaf -> collider.
     query_bvh: Bvh,
     query_leaves: Vec<ColliderHandle>,
+    /// The colliders moved since `query_bvh` was built: rebuilt by
+    /// [`RigidContext::refresh_queries`] before the next contact query (a robot-only scene
+    /// never pays for it).
+    queries_stale: bool,
 }
 
 #[derive(Clone)]
@@ -175,6 +179,7 @@ impl RigidContext {
             pending: Vec::new(),
             query_bvh: Bvh::new(),
             query_leaves: Vec::new(),
+            queries_stale: true,
         }
     }
 
@@ -215,6 +220,7 @@ impl RigidContext {
         self.colliders
             .insert_with_parent(collider.build(), handle, &mut self.bodies);
         self.body_ids.push((handle, entity));
+        self.queries_stale = true;
         handle
     }
 
@@ -280,9 +286,9 @@ impl RigidContext {
     }
 
     /// After bodies were moved outside a step (spawning a robot in its start configuration, a
-    /// reset event's start pose): puts the colliders attached to them back on their bodies,
-    /// then [`RigidContext::refresh_queries`]. Rapier itself moves them only at its next step;
-    /// until then queries and cameras would see the old place.
+    /// reset event's start pose): puts the colliders attached to them back on their bodies and
+    /// marks the query structure stale. Rapier itself moves them only at its next step; until
+    /// then queries and cameras would see the old place.
     pub fn bodies_moved(&mut self) {
         for (_, co) in self.colliders.iter_mut() {
             let Some(body) = co.parent().and_then(|b| self.bodies.get(b)) else {
@@ -296,19 +302,30 @@ impl RigidContext {
                 co.set_position(pos);
             }
         }
-        self.refresh_queries();
+        self.queries_stale = true;
     }
 
-    /// Rebuilds the collision query structure from the colliders' current poses (done after
-    /// every rapier step, where rapier has already moved the colliders with their bodies).
+    /// Rebuilds the collision query structure from the colliders' current poses if they moved
+    /// since it was built (rapier steps and [`RigidContext::bodies_moved`] mark it stale). The
+    /// deformable step calls it before its contact queries; a query on a stale structure falls
+    /// back to testing every collider, so results never depend on who called this.
     pub fn refresh_queries(&mut self) {
-        self.query_leaves.clear();
+        if !self.queries_stale {
+            return;
+        }
+        self.queries_stale = false;
+        (self.query_bvh, self.query_leaves) = self.build_query_bvh();
+    }
+
+    /// A BVH over the colliders' current AABBs and its leaf -> collider table.
+    fn build_query_bvh(&self) -> (Bvh, Vec<ColliderHandle>) {
+        let mut leaves = Vec::with_capacity(self.colliders.len());
         let mut aabbs = Vec::with_capacity(self.colliders.len());
         for (h, co) in self.colliders.iter() {
-            self.query_leaves.push(h);
+            leaves.push(h);
             aabbs.push(co.compute_aabb());
         }
-        self.query_bvh = Bvh::from_leaves(BvhBuildStrategy::Binned, &aabbs);
+        (Bvh::from_leaves(BvhBuildStrategy::Binned, &aabbs), leaves)
     }
 
     /// Advances the rigid world by `dt` seconds, applying pending reactions as forces.
@@ -362,7 +379,7 @@ impl RigidContext {
                 b.add_torque(torque, false);
             }
         }
-        self.refresh_queries();
+        self.queries_stale = true;
         let q = self.pipeline.quarantine();
         if !q.is_empty() {
             return Err(format!(
@@ -395,8 +412,17 @@ impl ContactQuery for RigidContext {
         let m = max_distance as f32;
         let half = rapier3d::math::Vector::new(m, m, m);
         let q = Aabb::new(pr - half, pr + half);
-        for leaf in self.query_bvh.leaves(|node| node.aabb().intersects(&q)) {
-            let Some(&ch) = self.query_leaves.get(leaf as usize) else {
+        // A stale structure (a caller that did not refresh it) is built afresh for this query
+        // the same way, so the contacts and their order are the same either way.
+        let fresh;
+        let (bvh, leaves) = if self.queries_stale {
+            fresh = self.build_query_bvh();
+            (&fresh.0, &fresh.1)
+        } else {
+            (&self.query_bvh, &self.query_leaves)
+        };
+        for leaf in bvh.leaves(|node| node.aabb().intersects(&q)) {
+            let Some(&ch) = leaves.get(leaf as usize) else {
                 continue;
             };
             let Some(co) = self.colliders.get(ch) else {
@@ -546,7 +572,7 @@ impl Stateful for RigidContext {
             // The pipeline holds only workspace, but a fresh one also drops memos tied to the
             // replaced sets.
             self.pipeline = PhysicsPipeline::new();
-            self.refresh_queries();
+            self.queries_stale = true;
         }
     }
 
