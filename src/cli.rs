@@ -68,7 +68,7 @@ pub enum Command {
     Run(RunArgs),
     /// Open the interactive viewer (orbit camera, pause/step/reset, keyboard teleoperation).
     View(ViewArgs),
-    /// Run a benchmark suite: engine, fem, pbd, render (more suites arrive with their plugins).
+    /// Run a benchmark suite: engine, fem, pbd, robots, render, tasks.
     Bench {
         /// Suite name.
         name: String,
