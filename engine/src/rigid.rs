@@ -307,8 +307,8 @@ impl RigidContext {
 
     /// Rebuilds the collision query structure from the colliders' current poses if they moved
     /// since it was built (rapier steps and [`RigidContext::bodies_moved`] mark it stale). The
-    /// deformable step calls it before its contact queries; a query on a stale structure falls
-    /// back to testing every collider, so results never depend on who called this.
+    /// deformable step calls it before its contact queries; a query on a stale structure builds
+    /// the same structure for itself (slower), so results never depend on who called this.
     pub fn refresh_queries(&mut self) {
         if !self.queries_stale {
             return;

@@ -32,19 +32,22 @@
 //!   velocity) and an integral of the body height error (height measured from the stance feet by
 //!   forward kinematics, so no floor is assumed). Stance legs lengthen under a low hip and shorten
 //!   under a high one.
-//! - **Level stance.** Stance foot targets are turned from H into the base frame as if the body
-//!   were level (`stance_level` 1), so the leg joints pull a tilted body back to level. Solving
-//!   them with the measured roll instead made the legs follow the tilt: Spot's hips sit 5.5 cm
-//!   either side of the roll axis, so the hip height term above hardly resists roll, and the
-//!   body drifted to 0.8 rad of roll when turning fast with the arm moving (and rolled over
-//!   under a 20 N pull). Measured over 60 s of random commands with the arm sweeping and a 20 N
-//!   pull (seeds 2026, 7, 11, 42, 99): largest |roll| 0.42 rad with a level stance, period
-//!   0.3 s and Raibert gain 0.25 s; falls on two seeds with the old (0.4 s, 0.15 s). kd 25
-//!   lowered that to 0.26 rad, but Spot then yielded sideways to the belt it holds in Lift.
+//! - **Level stance.** While stepping, stance foot targets are turned from H into the base frame
+//!   as if the body were level (`stance_level` 1), so the leg joints pull a tilted body back to
+//!   level; a robot standing on four feet uses the measured tilt (levelling there made the legs
+//!   push against the planted feet). Solving stance legs with the measured roll made the legs
+//!   follow the tilt: Spot's hips sit 5.5 cm either side of the roll axis, so the hip height
+//!   term above hardly resists roll, and the body drifted to 0.8 rad of roll when turning fast
+//!   with the arm moving (and rolled over under a 20 N pull). Measured over 60 s of random
+//!   commands with the arm sweeping and a 20 N pull (seeds 2026, 7, 11, 42, 99): largest |roll|
+//!   0.42 rad with a level stance, period 0.3 s and Raibert gain 0.25 s; falls on two seeds
+//!   with the old (0.4 s, 0.15 s). kd 25 lowered that to 0.26 rad, but Spot then yielded
+//!   sideways to the belt it holds in Lift.
 //! - **Inverse kinematics.** Swing foot targets are turned from H into the base frame with the
-//!   measured roll and pitch; all are solved by the analytic 3-DoF leg inverse kinematics of [`LegKinematics`]
-//!   (hip roll, then a planar two-link hip pitch / knee chain). Joint target velocities come from
-//!   the foot target velocities through the same inverse kinematics (finite difference).
+//!   measured roll and pitch; all are solved by the analytic 3-DoF leg inverse kinematics of
+//!   [`LegKinematics`] (hip roll, then a planar two-link hip pitch / knee chain). Joint target
+//!   velocities come from the foot target velocities through the same inverse kinematics
+//!   (finite difference).
 //! - **Joint commands.** [`TrotController::write`] sets the leg gains and a position command
 //!   `q + (kd / kp) qd` for each leg joint: a PD motor `kp (q_c - q) - kd q'` with that command is
 //!   exactly `kp (q - q_meas) + kd (qd - q'_meas)`, PD with velocity feed-forward.
@@ -697,9 +700,8 @@ impl TrotController {
                     - self.height_integral;
             }
             // Into the base frame and through the inverse kinematics (stance legs with the
-            // body levelled by `stance_level`).
-            // Standing on four feet holds roll by itself; levelling there made the legs push
-            // against the planted feet (the body crept 7 cm in 1 s after a stop).
+            // body levelled by `stance_level` while stepping; standing on four feet holds roll
+            // by itself, and levelling there made the body creep 7 cm in 1 s after a stop).
             let level = if self.stepping { p.stance_level } else { 0.0 };
             let r_ik = if swing || level == 0.0 {
                 r_rp
