@@ -197,7 +197,7 @@ pub trait Plugin: Send + Sync + 'static {
     fn name(&self) -> &str;
 }
 
-/// A list of plugins added together (for example [`crate::DefaultPlugins`]).
+/// A list of plugins added together (for example the default plugins of the `modesuite` crate).
 pub trait PluginGroup {
     /// The plugins, in build order.
     fn plugins(self) -> Vec<Arc<dyn Plugin>>;

@@ -17,7 +17,7 @@
 //!
 //! Registered capabilities join the same registries as static plugins ([`crate::registry`]):
 //! shape generators, terms ([`crate::terms::Term`]) and passive forces. The plugin's state slots
-//! live in [`PluginStates`] under the plugin's name, so snapshots, resets and determinism hashes
+//! live in [`crate::state::PluginStates`] under the plugin's name, so snapshots, resets and determinism hashes
 //! cover them. Callbacks may run on several threads at once (one per env).
 
 use std::ffi::c_void;

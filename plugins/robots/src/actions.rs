@@ -1,17 +1,17 @@
 //! Action modes of a robot: how a slice of the env's flat action becomes controller commands.
 //!
 //! A robot's action is the concatenation of its parts, in this order (dims in brackets):
-//! - base: `Velocity` [3] = (vx, vy, wz) in [-1, 1], scaled by the base's limits (a holonomic
-//!   base); `Locomotion` [3] the same command for a legged base's walking controller;
-//!   `LegJoints` [12] leg targets `q_stand + leg_scale * a`; `Off` [0].
-//! - arm: `JointDelta` [n] `q_target += joint_delta_scale * dt * a` (the precursor's mode);
-//!   `JointPosition` [n] `a` in [-1, 1] mapped linearly onto the joint limits; `EePoseDelta` [6]
+//! - base: `Velocity` \[3\] = (vx, vy, wz) in [-1, 1], scaled by the base's limits (a holonomic
+//!   base); `Locomotion` \[3\] the same command for a legged base's walking controller;
+//!   `LegJoints` \[12\] leg targets `q_stand + leg_scale * a`; `Off` \[0\].
+//! - arm: `JointDelta` \[n\] `q_target += joint_delta_scale * dt * a` (the precursor's mode);
+//!   `JointPosition` \[n\] `a` in [-1, 1] mapped linearly onto the joint limits; `EePoseDelta` \[6\]
 //!   (linear and angular velocity of the end-effector target in the base frame, in [-1, 1], scaled
-//!   by `ee_speed` and `ee_angular_speed`); `EePoseAbsolute` [6] (target position in the base
-//!   frame, m, and rotation vector, rad); `Off` [0]. End-effector targets are solved by IK over
+//!   by `ee_speed` and `ee_angular_speed`); `EePoseAbsolute` \[6\] (target position in the base
+//!   frame, m, and rotation vector, rad); `Off` \[0\]. End-effector targets are solved by IK over
 //!   the arm joints. Whatever the mode, an arm joint's target moves at most at the joint's
 //!   URDF velocity limit, so the PD motors never track a reference faster than the limit.
-//! - gripper: `Binary` [1] (a > 0 closes); `Off` [0].
+//! - gripper: `Binary` \[1\] (a > 0 closes); `Off` \[0\].
 //!
 //! With `discrete: true` the robot's whole action is one `Discrete(14)` value, the 14 keys of
 //! [`DiscreteKey`], each mapped onto the continuous modes at full speed for one control step.

@@ -2,7 +2,7 @@
 //! own seeded RNG) and `scripted` (the task's expert, named by the task section's `expert`).
 //!
 //! Experts read the task's state the way a privileged teacher would: [`TaskPoints`] (named
-//! points and targets), the robot's [`RobotObservation`](modesuite_robots::RobotObservation)
+//! points and targets), the robot's [`RobotObservation`]
 //! and controller targets, and write actions in the robot's configured action modes.
 
 use modesuite_engine::rng::EnvRng;
