@@ -394,17 +394,7 @@ struct RandomRun {
 /// seeded generator, optionally with the arm moving, and a `pull` N force in a random direction
 /// (per segment) on the gripper.
 fn random_commands(seed: u64, seconds: f64, pull: f64, arm_moving: bool) -> RandomRun {
-    random_commands_with(TrotParams::default(), seed, seconds, pull, arm_moving)
-}
-
-fn random_commands_with(
-    params: TrotParams,
-    seed: u64,
-    seconds: f64,
-    pull: f64,
-    arm_moving: bool,
-) -> RandomRun {
-    let mut w = Walker::new(params);
+    let mut w = Walker::new(TrotParams::default());
     let mut rng = EnvRng::from_seed(seed);
     let arm = w.spec.indices(&w.robot, w.spec.arm_joints).unwrap();
     let q0 = w.robot.joint_positions(&w.ctx).unwrap();
