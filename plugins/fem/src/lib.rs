@@ -73,6 +73,7 @@ pub mod error;
 pub mod material;
 pub mod model;
 pub mod plugin;
+mod precond;
 pub mod solid;
 pub mod sparse;
 pub mod testing;

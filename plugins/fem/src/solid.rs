@@ -60,6 +60,7 @@ use crate::element::{shape_values, NQ};
 use crate::error::FemError;
 use crate::material::Material;
 use crate::model::SolidModel;
+use crate::precond::{ContactFactor, Penalty};
 use crate::sparse::{dot, pcg, ProfileCholesky};
 use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::sync::Arc;
@@ -367,9 +368,17 @@ pub struct FemSolid {
     /// Shape at which the preconditioner is factored (`None`: rest).
     precond_at: Option<Vec<Vector3<f64>>>,
     // caches (not state)
-    precond: Option<([u64; 4], ProfileCholesky)>,
-    /// Block values of the factored matrix (for the chord solver's constrained PCG).
+    precond: Option<([u64; 4], ContactFactor)>,
+    /// Flops of a factorisation and of a solve in this model's profile.
+    profile_costs: (f64, f64),
+    /// Block values of the factored matrix without the contact penalties (for the chord solver's
+    /// constrained PCG, and refactored with new penalties when only the contact set changes).
     precond_mat: Vec<Matrix3<f64>>,
+    /// What `precond_mat` was built for: mass and stiffness coefficients, constraint version and
+    /// `precond_gen`.
+    precond_mat_key: Option<[u64; 4]>,
+    /// Bumped whenever `precond_at` is assigned.
+    precond_gen: u64,
     constraint_version: u64,
     /// Young's modulus of this solid over the model's (per-env material randomisation): the
     /// Stable Neo-Hookean energy is linear in E at a fixed Poisson ratio, so the elastic (and
@@ -433,7 +442,10 @@ impl FemSolid {
             next_id: 1,
             precond_at: None,
             precond: None,
+            profile_costs: ProfileCholesky::costs(&model.pattern, &model.order),
             precond_mat: Vec::new(),
+            precond_mat_key: None,
+            precond_gen: 0,
             constraint_version: 0,
             stiffness_scale: 1.0,
             hess: vec![Matrix3::zeros(); nb],
@@ -1134,38 +1146,88 @@ impl FemSolid {
                 return Ok(0);
             }
         }
+        let mat_key = [
+            c_mass.to_bits(),
+            c_stiff.to_bits(),
+            self.constraint_version,
+            self.precond_gen,
+        ];
+        let previous = self.precond.take();
+        if self.precond_mat_key == Some(mat_key) {
+            // only the contacts changed: the matrix without them is the one built last time
+            let base = previous.and_then(|(_, f)| f.into_base());
+            let penalties = self.penalties(&self.precond_mat, &contacts);
+            if let Ok((f, k)) = ContactFactor::new(
+                base,
+                true,
+                &self.precond_mat,
+                &self.model.pattern.diag,
+                &penalties,
+                self.profile_costs,
+                |m| ProfileCholesky::factor(&self.model.pattern, m, &self.model.order),
+            ) {
+                self.precond = Some((key, f));
+                return Ok(k);
+            }
+        }
+        self.precond_mat_key = None;
         let x_ref = self
             .precond_at
             .clone()
             .unwrap_or_else(|| self.model.mesh.rest.clone());
         let mut vals = vec![Matrix3::zeros(); self.model.pattern.cols.len()];
         let mut g = vec![Vector3::zeros(); self.n_nodes()];
-        // unprojected first (matches the Newton matrix); projected if that is not positive definite
+        // at the rest shape unprojected (exact there); at a deformed reference shape projected
+        // (ARCHITECTURE.md: an unprojected tangent in compression was nearly singular and gave
+        // metre-long steps); projected if the unprojected one is not positive definite
         let mut out = Err(FemError::NotPositiveDefinite(String::new()));
         for project in [self.precond_at.is_some(), true] {
             self.model
                 .eval(&x_ref, &mut g, Some(&mut vals), project, None);
-            out = self.factor_system(&mut vals, c_mass, c_stiff, &contacts);
+            self.system_matrix(&mut vals, c_mass, c_stiff);
+            let penalties = self.penalties(&vals, &contacts);
+            out = ContactFactor::new(
+                None,
+                false,
+                &vals,
+                &self.model.pattern.diag,
+                &penalties,
+                self.profile_costs,
+                |m| ProfileCholesky::factor(&self.model.pattern, m, &self.model.order),
+            );
             if out.is_ok() {
                 break;
             }
         }
-        let (f, base) = out?;
+        let (f, k) = out?;
         self.precond = Some((key, f));
-        self.precond_mat = base;
-        Ok(1)
+        self.precond_mat = vals;
+        self.precond_mat_key = Some(mat_key);
+        Ok(k)
     }
 
-    /// Builds the system matrix in `vals` (scaled stiffness, masses, grasp springs, constraints)
-    /// and factors it with the contact penalties added; returns the factor and the matrix
-    /// without the contact penalties.
-    fn factor_system(
+    /// The contacts' stiff penalties on the system matrix `vals`: `1e6` times the norm of the
+    /// node's diagonal block, along the normal (all three directions when sticking).
+    fn penalties(
         &self,
-        vals: &mut [Matrix3<f64>],
-        c_mass: f64,
-        c_stiff: f64,
+        vals: &[Matrix3<f64>],
         contacts: &[(u32, Vector3<f64>, bool)],
-    ) -> Result<(ProfileCholesky, Vec<Matrix3<f64>>), FemError> {
+    ) -> Vec<Penalty> {
+        let pat = &self.model.pattern;
+        contacts
+            .iter()
+            .map(|&(node, n, stick)| {
+                let scale = vals[pat.diag[node as usize] as usize].norm().max(1e-300);
+                let n = n.try_normalize(1e-12).unwrap_or(Vector3::z());
+                (node, n, stick, 1e6 * scale)
+            })
+            .collect()
+    }
+
+    /// Turns the scaled elastic Hessian in `vals` into the system matrix without contacts:
+    /// stiffness scaled by `c_stiff`, masses by `c_mass`, grasp springs, full constraints
+    /// eliminated and partial ones penalised, and a tiny regularisation.
+    fn system_matrix(&self, vals: &mut [Matrix3<f64>], c_mass: f64, c_stiff: f64) {
         for v in vals.iter_mut() {
             *v *= c_stiff;
         }
@@ -1206,19 +1268,6 @@ impl FemSolid {
         for i in 0..self.n_nodes() {
             vals[pat.diag[i] as usize] += Matrix3::identity() * (1e-10 * mean_diag);
         }
-        let base = vals.to_vec();
-        for (node, n, stick) in contacts {
-            let d = pat.diag[*node as usize] as usize;
-            let scale = vals[d].norm().max(1e-300);
-            let n = n.try_normalize(1e-12).unwrap_or(Vector3::z());
-            let proj = if *stick {
-                Matrix3::identity()
-            } else {
-                n * n.transpose()
-            };
-            vals[d] += proj * (1e6 * scale);
-        }
-        Ok((ProfileCholesky::factor(pat, vals, &self.model.order)?, base))
     }
 
     fn grasp_energy_grad(&self, x: &[Vector3<f64>], grad: Option<&mut [Vector3<f64>]>) -> f64 {
@@ -1482,6 +1531,7 @@ impl FemSolid {
             if self.last_linear_iterations > self.config.refactor_iterations {
                 // the rest-state preconditioner no longer fits the current shape: refactor here
                 self.precond_at = Some(self.pos.clone());
+                self.precond_gen += 1;
                 self.precond = None;
             }
         }
@@ -1665,6 +1715,7 @@ impl FemSolid {
             if (alpha < 1.0 || moved > 0.5 * prev_step) && !refactored {
                 // slow or damped convergence: refactor the matrix at the current shape (once per solve)
                 self.precond_at = Some(self.pos.clone());
+                self.precond_gen += 1;
                 self.precond = None;
                 refactored = true;
             } else if alpha == 0.0 {
@@ -1901,6 +1952,7 @@ impl FemSolid {
                 g.slip_distance = s;
             }
             self.precond_at = precond_backup;
+            self.precond_gen += 1;
             reactions.truncate(reactions_len);
             return Err(err);
         }
@@ -2422,6 +2474,7 @@ impl FemSolid {
         self.attachments = attachments;
         self.grasps = grasps;
         self.precond_at = precond_at;
+        self.precond_gen += 1;
         self.stiffness_scale = stiffness_scale;
         self.precond = None;
         self.constraint_version += 1;
