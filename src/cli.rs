@@ -950,7 +950,13 @@ fn run_scene(
             }
             progress.update(ep * steps + i + 1);
             if o.terminated || o.truncated {
-                success = o.info.success;
+                // An episode that ended in an error counts as a failure where the task has a
+                // success criterion (its earlier steps reported one): the error step itself
+                // measures no success.
+                success = match (&o.info.error, o.info.success) {
+                    (Some(_), None) => success.map(|_| false),
+                    (_, s) => s,
+                };
                 error = o.info.error.clone();
                 break;
             }

@@ -137,13 +137,11 @@ impl ContactFactor {
         match nalgebra::Cholesky::new(s) {
             Some(s) => {
                 let contacts = Contacts::LowRank { cols, w, s };
-                Ok((
-                    ContactFactor {
-                        base: Some(b),
-                        contacts,
-                    },
-                    factored,
-                ))
+                let me = ContactFactor {
+                    base: Some(b),
+                    contacts,
+                };
+                Ok((me, factored))
             }
             None => full(Some(b)).map(|(f, k)| (f, k + factored)),
         }
