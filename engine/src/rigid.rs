@@ -132,7 +132,7 @@ pub struct RigidContext {
     pending: Vec<Reaction>,
     /// Query acceleration: a BVH over the colliders' current AABBs, leaf -> collider.
     query_bvh: Bvh,
-    query_leaves: Vec<ColliderHandle>,
+    query_leaves: Vec<QueryLeaf>,
     /// The colliders moved since `query_bvh` was built: rebuilt by
     /// [`RigidContext::refresh_queries`] before the next contact query (a robot-only scene
     /// never pays for it).
@@ -318,11 +318,16 @@ impl RigidContext {
     }
 
     /// A BVH over the colliders' current AABBs and its leaf -> collider table.
-    fn build_query_bvh(&self) -> (Bvh, Vec<ColliderHandle>) {
+    fn build_query_bvh(&self) -> (Bvh, Vec<QueryLeaf>) {
         let mut leaves = Vec::with_capacity(self.colliders.len());
         let mut aabbs = Vec::with_capacity(self.colliders.len());
         for (h, co) in self.colliders.iter() {
-            leaves.push(h);
+            let pose = co.position();
+            let plane = co
+                .shape()
+                .as_halfspace()
+                .map(|hs| (pose.rotation * hs.normal, pose.translation));
+            leaves.push(QueryLeaf { collider: h, plane });
             aabbs.push(co.compute_aabb());
         }
         (Bvh::from_leaves(BvhBuildStrategy::Binned, &aabbs), leaves)
@@ -406,6 +411,14 @@ impl RigidContext {
     }
 }
 
+/// A leaf of the query BVH: its collider and, for a half-space, the world normal and a point
+/// of its boundary plane.
+#[derive(Clone, Copy, Debug)]
+struct QueryLeaf {
+    collider: ColliderHandle,
+    plane: Option<(rapier3d::math::Vector, rapier3d::math::Vector)>,
+}
+
 impl ContactQuery for RigidContext {
     fn contacts_near(&self, p: &Vector3<f64>, max_distance: f64, out: &mut Vec<PointContact>) {
         let pr = vec_to_rapier(p);
@@ -422,10 +435,19 @@ impl ContactQuery for RigidContext {
             (&self.query_bvh, &self.query_leaves)
         };
         for leaf in bvh.leaves(|node| node.aabb().intersects(&q)) {
-            let Some(&ch) = leaves.get(leaf as usize) else {
+            let Some(ql) = leaves.get(leaf as usize) else {
                 continue;
             };
-            let Some(co) = self.colliders.get(ch) else {
+            // A half-space's AABB is infinite, so every query meets the ground plane: its
+            // distance is one dot product. Only points clearly farther than the query distance
+            // are skipped here (with a margin over rounding), so the contacts are exactly those
+            // of the general path below.
+            if let Some((n, o)) = ql.plane {
+                if n.dot(pr - o).abs() > m * 1.001 + 1e-6 {
+                    continue;
+                }
+            }
+            let Some(co) = self.colliders.get(ql.collider) else {
                 continue;
             };
             let proj = co.shape().project_point(co.position(), pr, false);
