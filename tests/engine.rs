@@ -447,6 +447,55 @@ fn coupling_query_finds_closest_points_normals_and_bodies() {
 }
 
 #[test]
+fn region_queries_return_the_same_contacts_in_the_same_order() {
+    use modesuite::engine::coupling::ContactQuery;
+    let text = r#"Scene(objects: [
+        (name: "ground", shape: Plane(size: (4.0, 4.0)), body: Static),
+        (name: "table", shape: Box(size: (1.0, 0.8, 0.05)), pose: (pos: (0.0, 0.0, 0.5)), body: Static),
+        (name: "cube", shape: Box(size: (0.2, 0.2, 0.2)), pose: (pos: (0.3, 0.1, 0.65)), body: Dynamic()),
+        (name: "ball", shape: Sphere(radius: 0.1), pose: (pos: (-0.3, -0.2, 0.62)), body: Static),
+        (name: "far", shape: Box(size: (0.2, 0.2, 0.2)), pose: (pos: (3.0, 3.0, 0.1)), body: Static),
+    ])"#;
+    let mut app = app_from_ron(text);
+    app.world.resource_mut::<RigidContext>().refresh_queries();
+    let rigid = app.world.resource::<RigidContext>();
+    let (lo, hi) = (
+        nalgebra::Vector3::new(-0.8, -0.6, -0.1),
+        nalgebra::Vector3::new(0.8, 0.6, 1.0),
+    );
+    let region = rigid
+        .region(&lo, &hi)
+        .expect("a refreshed context narrows queries");
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let mut compared = 0;
+    let mut found = 0;
+    for i in 0..13 {
+        for j in 0..9 {
+            for k in 0..11 {
+                let r = 0.02 + 0.01 * ((i + j + k) % 5) as f64;
+                let p = nalgebra::Vector3::new(
+                    -0.7 + 0.115 * i as f64,
+                    -0.5 + 0.12 * j as f64,
+                    -0.05 + 0.095 * k as f64,
+                );
+                if (0..3).any(|c| p[c] - r < lo[c] || p[c] + r > hi[c]) {
+                    continue;
+                }
+                a.clear();
+                b.clear();
+                rigid.contacts_near(&p, r, &mut a);
+                region.contacts_near(&p, r, &mut b);
+                assert_eq!(a, b, "at {p:?} within {r}");
+                compared += 1;
+                found += a.len();
+            }
+        }
+    }
+    println!("{compared} points compared, {found} contacts, all identical");
+    assert!(compared > 500 && found > 100);
+}
+
+#[test]
 fn reactions_push_dynamic_bodies() {
     use modesuite::engine::coupling::Reaction;
     let text = r#"Scene(physics: (gravity: (0.0, 0.0, 0.0)), objects: [

@@ -29,6 +29,14 @@ pub struct PointContact {
 pub trait ContactQuery {
     /// Appends one [`PointContact`] per collider within `max_distance` of `p` to `out`.
     fn contacts_near(&self, p: &Vector3<f64>, max_distance: f64, out: &mut Vec<PointContact>);
+
+    /// The same queries restricted to the colliders that may come near the box `[lo, hi]`, for a
+    /// solver about to make many queries inside it (a cloth's particles): every
+    /// `contacts_near(p, d)` whose cube `p +- d` lies inside the box returns the same contacts,
+    /// in the same order, as on `self`. `None` (the default) means "query `self`".
+    fn region(&self, _lo: &Vector3<f64>, _hi: &Vector3<f64>) -> Option<Box<dyn ContactQuery + '_>> {
+        None
+    }
 }
 
 /// An impulse a deformable applied to rigid body `body` at `point` during a substep, N s.

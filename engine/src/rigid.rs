@@ -327,8 +327,13 @@ impl RigidContext {
                 .shape()
                 .as_halfspace()
                 .map(|hs| (pose.rotation * hs.normal, pose.translation));
-            leaves.push(QueryLeaf { collider: h, plane });
-            aabbs.push(co.compute_aabb());
+            let aabb = co.compute_aabb();
+            leaves.push(QueryLeaf {
+                collider: h,
+                aabb,
+                plane,
+            });
+            aabbs.push(aabb);
         }
         (Bvh::from_leaves(BvhBuildStrategy::Binned, &aabbs), leaves)
     }
@@ -411,20 +416,114 @@ impl RigidContext {
     }
 }
 
-/// A leaf of the query BVH: its collider and, for a half-space, the world normal and a point
-/// of its boundary plane.
+/// A leaf of the query BVH: its collider, the AABB it was built with and, for a half-space, the
+/// world normal and a point of its boundary plane.
 #[derive(Clone, Copy, Debug)]
 struct QueryLeaf {
     collider: ColliderHandle,
+    aabb: Aabb,
     plane: Option<(rapier3d::math::Vector, rapier3d::math::Vector)>,
+}
+
+/// [`RigidContext`]'s queries inside a region: the leaves whose AABB meets the region, in the
+/// BVH's traversal order, so that filtering them by a query's box visits exactly the leaves, in
+/// the order, that the traversal of the whole BVH for that box would.
+struct RegionQuery<'a> {
+    ctx: &'a RigidContext,
+    leaves: Vec<QueryLeaf>,
+}
+
+impl ContactQuery for RegionQuery<'_> {
+    fn contacts_near(&self, p: &Vector3<f64>, max_distance: f64, out: &mut Vec<PointContact>) {
+        let (pr, m, q) = query_box(p, max_distance);
+        for ql in self.leaves.iter().filter(|l| l.aabb.intersects(&q)) {
+            self.ctx.leaf_contact(ql, pr, m, out);
+        }
+    }
+}
+
+/// A point query's point, distance and box, in rapier's types.
+fn query_box(p: &Vector3<f64>, max_distance: f64) -> (rapier3d::math::Vector, f32, Aabb) {
+    let pr = vec_to_rapier(p);
+    let m = max_distance as f32;
+    let half = rapier3d::math::Vector::new(m, m, m);
+    (pr, m, Aabb::new(pr - half, pr + half))
+}
+
+impl RigidContext {
+    /// The contact of one query leaf's collider with the point `pr` within `m`, if any.
+    fn leaf_contact(
+        &self,
+        ql: &QueryLeaf,
+        pr: rapier3d::math::Vector,
+        m: f32,
+        out: &mut Vec<PointContact>,
+    ) {
+        // A half-space's AABB is infinite, so every query meets the ground plane: its
+        // distance is one dot product. Only points clearly farther than the query distance
+        // are skipped here (with a margin over rounding), so the contacts are exactly those
+        // of the general path below.
+        if let Some((n, o)) = ql.plane {
+            if n.dot(pr - o).abs() > m * 1.001 + 1e-6 {
+                return;
+            }
+        }
+        let Some(co) = self.colliders.get(ql.collider) else {
+            return;
+        };
+        let proj = co.shape().project_point(co.position(), pr, false);
+        let delta = pr - proj.point;
+        let dist = delta.length();
+        if dist > m {
+            return;
+        }
+        let normal = if dist > 1e-7 {
+            let n = delta / dist;
+            if proj.is_inside {
+                -n
+            } else {
+                n
+            }
+        } else {
+            // Exactly on the surface: the gradient of the signed distance.
+            let e = 1e-4f32;
+            let mut g = rapier3d::math::Vector::ZERO;
+            for axis in 0..3 {
+                let mut dp = rapier3d::math::Vector::ZERO;
+                dp[axis] = e;
+                let a = Self::signed_distance(co, pr + dp).unwrap_or(0.0);
+                let b = Self::signed_distance(co, pr - dp).unwrap_or(0.0);
+                g[axis] = (a - b) / (2.0 * e);
+            }
+            g.normalize_or(rapier3d::math::Vector::Z)
+        };
+        let signed = if proj.is_inside { -dist } else { dist };
+        let (body, velocity) = match co.parent() {
+            Some(bh) => {
+                let id = self.body_id(bh).unwrap_or(u32::MAX);
+                let v = self
+                    .bodies
+                    .get(bh)
+                    .map(|b| b.velocity_at_point(proj.point))
+                    .unwrap_or(rapier3d::math::Vector::ZERO);
+                (id, v)
+            }
+            None => (u32::MAX, rapier3d::math::Vector::ZERO),
+        };
+        out.push(PointContact {
+            point: vec_from_rapier(proj.point),
+            normal: vec_from_rapier(normal),
+            distance: f64::from(signed),
+            friction: f64::from(co.friction()),
+            body,
+            velocity: vec_from_rapier(velocity),
+        });
+    }
 }
 
 impl ContactQuery for RigidContext {
     fn contacts_near(&self, p: &Vector3<f64>, max_distance: f64, out: &mut Vec<PointContact>) {
-        let pr = vec_to_rapier(p);
-        let m = max_distance as f32;
-        let half = rapier3d::math::Vector::new(m, m, m);
-        let q = Aabb::new(pr - half, pr + half);
+        let (pr, m, q) = query_box(p, max_distance);
         // A stale structure (a caller that did not refresh it) is built afresh for this query
         // the same way, so the contacts and their order are the same either way.
         let fresh;
@@ -435,69 +534,23 @@ impl ContactQuery for RigidContext {
             (&self.query_bvh, &self.query_leaves)
         };
         for leaf in bvh.leaves(|node| node.aabb().intersects(&q)) {
-            let Some(ql) = leaves.get(leaf as usize) else {
-                continue;
-            };
-            // A half-space's AABB is infinite, so every query meets the ground plane: its
-            // distance is one dot product. Only points clearly farther than the query distance
-            // are skipped here (with a margin over rounding), so the contacts are exactly those
-            // of the general path below.
-            if let Some((n, o)) = ql.plane {
-                if n.dot(pr - o).abs() > m * 1.001 + 1e-6 {
-                    continue;
-                }
+            if let Some(ql) = leaves.get(leaf as usize) {
+                self.leaf_contact(ql, pr, m, out);
             }
-            let Some(co) = self.colliders.get(ql.collider) else {
-                continue;
-            };
-            let proj = co.shape().project_point(co.position(), pr, false);
-            let delta = pr - proj.point;
-            let dist = delta.length();
-            if dist > m {
-                continue;
-            }
-            let normal = if dist > 1e-7 {
-                let n = delta / dist;
-                if proj.is_inside {
-                    -n
-                } else {
-                    n
-                }
-            } else {
-                // Exactly on the surface: the gradient of the signed distance.
-                let e = 1e-4f32;
-                let mut g = rapier3d::math::Vector::ZERO;
-                for axis in 0..3 {
-                    let mut dp = rapier3d::math::Vector::ZERO;
-                    dp[axis] = e;
-                    let a = Self::signed_distance(co, pr + dp).unwrap_or(0.0);
-                    let b = Self::signed_distance(co, pr - dp).unwrap_or(0.0);
-                    g[axis] = (a - b) / (2.0 * e);
-                }
-                g.normalize_or(rapier3d::math::Vector::Z)
-            };
-            let signed = if proj.is_inside { -dist } else { dist };
-            let (body, velocity) = match co.parent() {
-                Some(bh) => {
-                    let id = self.body_id(bh).unwrap_or(u32::MAX);
-                    let v = self
-                        .bodies
-                        .get(bh)
-                        .map(|b| b.velocity_at_point(proj.point))
-                        .unwrap_or(rapier3d::math::Vector::ZERO);
-                    (id, v)
-                }
-                None => (u32::MAX, rapier3d::math::Vector::ZERO),
-            };
-            out.push(PointContact {
-                point: vec_from_rapier(proj.point),
-                normal: vec_from_rapier(normal),
-                distance: f64::from(signed),
-                friction: f64::from(co.friction()),
-                body,
-                velocity: vec_from_rapier(velocity),
-            });
         }
+    }
+
+    fn region(&self, lo: &Vector3<f64>, hi: &Vector3<f64>) -> Option<Box<dyn ContactQuery + '_>> {
+        if self.queries_stale {
+            return None;
+        }
+        let r = Aabb::new(vec_to_rapier(lo), vec_to_rapier(hi));
+        let leaves = self
+            .query_bvh
+            .leaves(|node| node.aabb().intersects(&r))
+            .filter_map(|leaf| self.query_leaves.get(leaf as usize).copied())
+            .collect();
+        Some(Box::new(RegionQuery { ctx: self, leaves }))
     }
 }
 

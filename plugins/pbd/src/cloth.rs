@@ -1365,6 +1365,24 @@ impl Cloth {
         self.c_impulse.clear();
         let half = 0.5 * self.material.thickness;
         let gdt = gravity.norm() * dt;
+        // every query below (particles, and edge midpoints with their endpoints' larger speed)
+        // lies inside the particles' box padded by the largest query distance: the rigid world
+        // narrows its colliders to that region once (same contacts, same order)
+        let mut lo = Vector3::repeat(f64::INFINITY);
+        let mut hi = Vector3::repeat(f64::NEG_INFINITY);
+        let mut reach: f64 = 0.0;
+        for (x, v) in self.pos.iter().zip(&self.vel) {
+            lo = lo.inf(x);
+            hi = hi.sup(x);
+            reach = reach.max(half + (v.norm() + gdt) * dt + self.settings.contact_margin);
+        }
+        let pad = Vector3::repeat(reach * 1.01 + 1e-4);
+        let region = if self.pos.is_empty() {
+            None
+        } else {
+            query.region(&(lo - pad), &(hi + pad))
+        };
+        let query: &dyn ContactQuery = region.as_deref().unwrap_or(query);
         for i in 0..self.pos.len() {
             // pinned particles are queried too (their normals decide edge contacts) but never
             // moved by contacts
