@@ -950,13 +950,7 @@ fn run_scene(
             }
             progress.update(ep * steps + i + 1);
             if o.terminated || o.truncated {
-                // An episode that ended in an error counts as a failure where the task has a
-                // success criterion (its earlier steps reported one): the error step itself
-                // measures no success.
-                success = match (&o.info.error, o.info.success) {
-                    (Some(_), None) => success.map(|_| false),
-                    (_, s) => s,
-                };
+                success = final_success(success, o.info.success, o.info.error.is_some());
                 error = o.info.error.clone();
                 break;
             }
@@ -1041,6 +1035,16 @@ fn run_scene(
     Ok(())
 }
 
+/// An episode's success from its last step: that step's value, except that an episode ended by
+/// an error counts as a failure where the task has a success criterion (its earlier steps
+/// reported one, `before`); the error step itself measures none.
+fn final_success(before: Option<bool>, last: Option<bool>, error: bool) -> Option<bool> {
+    match (error, last) {
+        (true, None) => before.map(|_| false),
+        (_, s) => s,
+    }
+}
+
 fn dump_final(
     env: &mut Env,
     target: &str,
@@ -1111,4 +1115,20 @@ fn bench(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::final_success;
+
+    #[test]
+    fn an_errored_episode_of_a_task_with_success_is_a_failure() {
+        // the error step measured nothing; earlier steps said "not yet": a failure
+        assert_eq!(final_success(Some(false), None, true), Some(false));
+        // no success criterion at all: still none
+        assert_eq!(final_success(None, None, true), None);
+        // a normal end keeps the last step's value
+        assert_eq!(final_success(Some(false), Some(true), false), Some(true));
+        assert_eq!(final_success(None, None, false), None);
+    }
 }
