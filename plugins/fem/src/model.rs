@@ -62,13 +62,22 @@ fn gather(x: &[Vector3<f64>], el: &[u32; 10]) -> [Vector3<f64>; 10] {
 
 /// Deformation gradient `sum_a x_a g_a^T` from an element's node positions and the shape-function
 /// gradients of one quadrature point.
-#[inline]
+#[inline(always)]
 fn interpolate(xe: &[Vector3<f64>; 10], g: &[Vector3<f64>; 10]) -> Matrix3<f64> {
-    let mut f = Matrix3::zeros();
+    // the nine sums written out (same order of additions as `f += x_a * g_a^T`), so that they
+    // stay in registers
+    let mut f = [[0.0f64; 3]; 3];
     for a in 0..10 {
-        f += xe[a] * g[a].transpose();
+        let (x, ga) = (&xe[a], &g[a]);
+        for (i, row) in f.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v += x[i] * ga[j];
+            }
+        }
     }
-    f
+    Matrix3::new(
+        f[0][0], f[0][1], f[0][2], f[1][0], f[1][1], f[1][2], f[2][0], f[2][1], f[2][2],
+    )
 }
 
 impl SolidModel {
