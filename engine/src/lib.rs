@@ -41,6 +41,7 @@ pub mod rigid;
 pub mod rng;
 pub mod scene;
 pub mod shapes;
+pub mod simd;
 pub mod state;
 pub mod terms;
 

@@ -1160,16 +1160,7 @@ impl FemSolid {
         if self.precond_mat_key == Some(mat_key) {
             // only the contacts changed: the matrix without them is the one built last time
             let base = previous.and_then(|(_, f)| f.into_base());
-            let penalties = self.penalties(&self.precond_mat, &contacts);
-            if let Ok((f, k)) = ContactFactor::new(
-                base,
-                true,
-                &self.precond_mat,
-                &self.model.pattern.diag,
-                &penalties,
-                self.profile_costs,
-                |m| ProfileCholesky::factor(&self.model.pattern, m, &self.model.order),
-            ) {
+            if let Ok((f, k)) = self.contact_factor(base, true, &self.precond_mat, &contacts) {
                 self.precond = Some((key, f));
                 return Ok(k);
             }
@@ -1189,16 +1180,7 @@ impl FemSolid {
             self.model
                 .eval(&x_ref, &mut g, Some(&mut vals), project, None);
             self.system_matrix(&mut vals, c_mass, c_stiff);
-            let penalties = self.penalties(&vals, &contacts);
-            out = ContactFactor::new(
-                None,
-                false,
-                &vals,
-                &self.model.pattern.diag,
-                &penalties,
-                self.profile_costs,
-                |m| ProfileCholesky::factor(&self.model.pattern, m, &self.model.order),
-            );
+            out = self.contact_factor(None, false, &vals, &contacts);
             if out.is_ok() {
                 break;
             }
@@ -1210,22 +1192,36 @@ impl FemSolid {
         Ok(k)
     }
 
-    /// The contacts' stiff penalties on the system matrix `vals`: `1e6` times the norm of the
-    /// node's diagonal block, along the normal (all three directions when sticking).
-    fn penalties(
+    /// Factors the system matrix `vals` with the contacts' stiff penalties (`1e6` times the norm
+    /// of the node's diagonal block, along the normal; all three directions when sticking),
+    /// reusing `base`, a factor of `vals` from an earlier contact set, when given;
+    /// `contacts_changed`: `vals` was factored before with other contacts (see
+    /// [`ContactFactor::new`]).
+    fn contact_factor(
         &self,
+        base: Option<ProfileCholesky>,
+        contacts_changed: bool,
         vals: &[Matrix3<f64>],
         contacts: &[(u32, Vector3<f64>, bool)],
-    ) -> Vec<Penalty> {
+    ) -> Result<(ContactFactor, usize), FemError> {
         let pat = &self.model.pattern;
-        contacts
+        let penalties: Vec<Penalty> = contacts
             .iter()
             .map(|&(node, n, stick)| {
                 let scale = vals[pat.diag[node as usize] as usize].norm().max(1e-300);
                 let n = n.try_normalize(1e-12).unwrap_or(Vector3::z());
                 (node, n, stick, 1e6 * scale)
             })
-            .collect()
+            .collect();
+        ContactFactor::new(
+            base,
+            contacts_changed,
+            vals,
+            &pat.diag,
+            &penalties,
+            self.profile_costs,
+            |m| ProfileCholesky::factor(pat, m, &self.model.order),
+        )
     }
 
     /// Turns the scaled elastic Hessian in `vals` into the system matrix without contacts:

@@ -9,6 +9,7 @@
 //! rest state and reused as the PCG preconditioner.
 
 use crate::error::FemError;
+use modesuite_engine::simd::have_avx2;
 use nalgebra::{Matrix3, Vector3};
 
 /// Sparsity pattern of a symmetric 3x3 block matrix over nodes (both triangles stored).
@@ -297,18 +298,6 @@ impl ProfileCholesky {
     }
 }
 
-/// Whether the AVX2 copies of the factor kernels can run on this machine.
-fn have_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
 /// The envelope factorisation and triangular solves. Their inner products are summed in eight
 /// interleaved partial sums (lane `k` takes the elements `k`, `k + 8`, ...), added pairwise at
 /// the end: a fixed order, so that LLVM can keep the lanes in vector registers and every target
@@ -393,56 +382,18 @@ mod kernels {
         }
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn factor_avx2(
-        a: &mut [f64],
-        dinv: &mut [f64],
-        first: &[u32],
-        start: &[usize],
-    ) -> Result<(), (usize, f64)> {
-        factor_body(a, dinv, first, start)
+    modesuite_engine::avx2_dispatch! {
+        /// Factors in place (see `factor_body`), with the AVX2 copy where `avx2`.
+        pub(super) fn factor / factor_avx2 => factor_body(
+            a: &mut [f64], dinv: &mut [f64], first: &[u32], start: &[usize]
+        ) -> Result<(), (usize, f64)>
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn solve_avx2(y: &mut [f64], vals: &[f64], dinv: &[f64], first: &[u32], start: &[usize]) {
-        solve_body(y, vals, dinv, first, start)
-    }
-
-    /// Factors in place (see `factor_body`), with the AVX2 copy where `avx2`.
-    pub(super) fn factor(
-        avx2: bool,
-        a: &mut [f64],
-        dinv: &mut [f64],
-        first: &[u32],
-        start: &[usize],
-    ) -> Result<(), (usize, f64)> {
-        #[cfg(target_arch = "x86_64")]
-        if avx2 {
-            // SAFETY: callers pass `avx2` true only where `have_avx2()` found the feature.
-            return unsafe { factor_avx2(a, dinv, first, start) };
-        }
-        let _ = avx2;
-        factor_body(a, dinv, first, start)
-    }
-
-    /// Solves in place (see `solve_body`), with the AVX2 copy where `avx2`.
-    pub(super) fn solve(
-        avx2: bool,
-        y: &mut [f64],
-        vals: &[f64],
-        dinv: &[f64],
-        first: &[u32],
-        start: &[usize],
-    ) {
-        #[cfg(target_arch = "x86_64")]
-        if avx2 {
-            // SAFETY: callers pass `avx2` true only where `have_avx2()` found the feature.
-            return unsafe { solve_avx2(y, vals, dinv, first, start) };
-        }
-        let _ = avx2;
-        solve_body(y, vals, dinv, first, start)
+    modesuite_engine::avx2_dispatch! {
+        /// Solves in place (see `solve_body`), with the AVX2 copy where `avx2`.
+        pub(super) fn solve / solve_avx2 => solve_body(
+            y: &mut [f64], vals: &[f64], dinv: &[f64], first: &[u32], start: &[usize]
+        )
     }
 }
 

@@ -1365,6 +1365,9 @@ impl Cloth {
         self.c_impulse.clear();
         let half = 0.5 * self.material.thickness;
         let gdt = gravity.norm() * dt;
+        let margin = self.settings.contact_margin;
+        // query distance of a point moving at `speed`: half the thickness, the step's travel
+        let radius = |speed: f64| half + (speed + gdt) * dt + margin;
         // every query below (particles, and edge midpoints with their endpoints' larger speed)
         // lies inside the particles' box padded by the largest query distance: the rigid world
         // narrows its colliders to that region once (same contacts, same order)
@@ -1374,7 +1377,7 @@ impl Cloth {
         for (x, v) in self.pos.iter().zip(&self.vel) {
             lo = lo.inf(x);
             hi = hi.sup(x);
-            reach = reach.max(half + (v.norm() + gdt) * dt + self.settings.contact_margin);
+            reach = reach.max(radius(v.norm()));
         }
         let pad = Vector3::repeat(reach * 1.01 + 1e-4);
         let region = if self.pos.is_empty() {
@@ -1386,7 +1389,7 @@ impl Cloth {
         for i in 0..self.pos.len() {
             // pinned particles are queried too (their normals decide edge contacts) but never
             // moved by contacts
-            let r = half + (self.vel[i].norm() + gdt) * dt + self.settings.contact_margin;
+            let r = radius(self.vel[i].norm());
             self.query_buf.clear();
             query.contacts_near(&self.pos[i], r, &mut self.query_buf);
             self.push_queried(i, 0.0)?;
@@ -1434,7 +1437,7 @@ impl Cloth {
             }
             let mid = (self.pos[a] + self.pos[b]) * 0.5;
             let speed = self.vel[a].norm().max(self.vel[b].norm());
-            let r = half + (speed + gdt) * dt + self.settings.contact_margin;
+            let r = radius(speed);
             self.query_buf.clear();
             query.contacts_near(&mid, r, &mut self.query_buf);
             for c in &self.query_buf {

@@ -198,42 +198,8 @@ impl OnceRows {
     }
 }
 
-/// Whether the AVX2 versions of the kernels can run on this machine.
-#[inline]
-pub(crate) fn have_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
-/// Defines `$name(avx2: bool, args...)` calling the inlined body `$body` either in an
-/// AVX2-enabled copy or in the baseline one.
-macro_rules! dispatch {
-    ($(#[$m:meta])* fn $name:ident / $avx:ident => $body:ident($($arg:ident: $ty:ty),*)) => {
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
-        #[allow(clippy::too_many_arguments)]
-        fn $avx($($arg: $ty),*) {
-            $body($($arg),*)
-        }
-        $(#[$m])*
-        #[inline(never)]
-        pub(crate) fn $name(avx2: bool, $($arg: $ty),*) {
-            #[cfg(target_arch = "x86_64")]
-            if avx2 {
-                // SAFETY: `avx2` is true only where `have_avx2()` found the feature.
-                return unsafe { $avx($($arg),*) };
-            }
-            let _ = avx2;
-            $body($($arg),*)
-        }
-    };
-}
+use modesuite_engine::avx2_dispatch as dispatch;
+pub(crate) use modesuite_engine::simd::have_avx2;
 
 #[inline(always)]
 fn dist_row_once(pos: &mut [P4], r: &DistRow) {
@@ -362,7 +328,7 @@ fn bending_once_body(pos: &mut [P4], rows: &[BendRow]) {
 dispatch! {
     /// One sweep over the isometric bending hinges for the first iteration of a substep: the
     /// constraint `C = sum_i K_i x_i` is linear, `dx_i = -w_i K_i C / (sum_j w_j K_j^2 + alpha~)`.
-    fn bending_once / bending_once_avx2 => bending_once_body(pos: &mut [P4], rows: &[BendRow])
+    pub(crate) fn bending_once / bending_once_avx2 => bending_once_body(pos: &mut [P4], rows: &[BendRow])
 }
 
 #[inline(always)]
@@ -376,7 +342,7 @@ fn velocities_body(x: &[P4], v: &mut [P4], prev: &[P4], inv_h: f64) {
 
 dispatch! {
     /// End of a substep: `v = (x - prev) / h`.
-    fn velocities / velocities_avx2 => velocities_body(x: &[P4], v: &mut [P4], prev: &[P4], inv_h: f64)
+    pub(crate) fn velocities / velocities_avx2 => velocities_body(x: &[P4], v: &mut [P4], prev: &[P4], inv_h: f64)
 }
 
 #[inline(always)]
@@ -413,8 +379,7 @@ dispatch! {
     /// Start of a substep: with `inv_h = Some(1 / h)` first the velocities of the substep before,
     /// `v = (x - prev) / h` (one pass over the particles instead of two); then `prev = x`, and for
     /// free particles `v = v damp + g h`, `x += v h`.
-    #[allow(clippy::too_many_arguments)]
-    fn advance / advance_avx2 => advance_body(
+    pub(crate) fn advance / advance_avx2 => advance_body(
         x: &mut [P4], v: &mut [P4], prev: &mut [P4], inv_mass: &[f64], inv_h: Option<f64>,
         damp: f64, gh: P4, h: f64
     )
