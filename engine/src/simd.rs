@@ -26,11 +26,18 @@ pub fn have_avx2() -> bool {
 /// function `$body(args...)` either in an AVX2-enabled copy (`$avx`, where `avx2` is true) or in
 /// the baseline one. Callers pass `avx2` true only where [`have_avx2`] said so.
 ///
-/// ```ignore
-/// modesuite_engine::avx2_dispatch! {
-///     /// Doc of the dispatcher.
-///     pub(crate) fn scale / scale_avx2 => scale_body(x: &mut [f64], s: f64)
+/// ```
+/// #[inline(always)]
+/// fn sum_body(x: &[f64]) -> f64 {
+///     x.iter().sum()
 /// }
+/// modesuite_engine::avx2_dispatch! {
+///     /// The sum of `x`.
+///     fn sum / sum_avx2 => sum_body(x: &[f64]) -> f64
+/// }
+/// let x = [0.1, 0.2, 0.3];
+/// let avx2 = modesuite_engine::simd::have_avx2();
+/// assert_eq!(sum(avx2, &x).to_bits(), sum(false, &x).to_bits());
 /// ```
 #[macro_export]
 macro_rules! avx2_dispatch {
