@@ -17,6 +17,7 @@
 //! | [`coupling`] | [`ContactQuery`], [`PointContact`], [`Reaction`]: the rigid-coupling interface |
 //! | [`bench`](mod@bench) | the reference-rod benchmark helpers |
 //! | [`testing`] | tiny Kuhn box mesher for tests and benchmarks |
+//! | [`warp`] | per-node rotations that warp the chord matrix to the current shape |
 //!
 //! Why 10-node elements: linear tetrahedra lock in bending (a coarse rod is 5-10x too stiff);
 //! quadratic ones reach a few percent of beam theory with one element through the thickness
@@ -77,6 +78,7 @@ mod precond;
 pub mod solid;
 pub mod sparse;
 pub mod testing;
+pub mod warp;
 
 pub use coupling::{ContactQuery, HalfSpace, NoContacts, PointContact, Reaction};
 pub use error::FemError;

@@ -62,6 +62,7 @@ use crate::material::Material;
 use crate::model::SolidModel;
 use crate::precond::{ContactFactor, Penalty};
 use crate::sparse::{dot, pcg, ProfileCholesky};
+use crate::warp::Warp;
 use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::sync::Arc;
 
@@ -100,6 +101,11 @@ pub struct FemConfig {
     /// release once "converged" to nodes at 600 m/s with inverted elements, whose reactions then
     /// blew up the robot (1,000 m/s let it through; at 100 m/s the step is halved and succeeds).
     pub max_speed: f64,
+    /// Chord matrix warped by per-node rotations from its reference shape to the current shape
+    /// (`R A R^T`, see [`crate::warp`]): a bending or swinging belt keeps the chord's contraction
+    /// without refactoring as often. The solution is the same to the Newton tolerance; only the
+    /// iteration and refactor counts change (`false`: the plain factored matrix).
+    pub warped_chord: bool,
 }
 
 impl Default for FemConfig {
@@ -116,6 +122,7 @@ impl Default for FemConfig {
             contact_margin: 1e-3,
             collider_speed_bound: 2.0,
             max_speed: 100.0,
+            warped_chord: true,
         }
     }
 }
@@ -403,6 +410,8 @@ pub struct FemSolid {
     normals: Vec<Vector3<f64>>,
     con_forces: Vec<(u32, Vector3<f64>)>,
     last_linear_iterations: usize,
+    /// Rotations of the warped chord matrix (a cache of the state, see [`crate::warp`]).
+    warp: Warp,
 }
 
 fn finite3(v: &Vector3<f64>) -> bool {
@@ -466,6 +475,7 @@ impl FemSolid {
             normals: Vec::new(),
             con_forces: Vec::new(),
             last_linear_iterations: 0,
+            warp: Warp::default(),
             model,
             config,
         }
@@ -1627,6 +1637,13 @@ impl FemSolid {
         // potential at `self.pos` once a line search has evaluated it there (the accepted trial is
         // bitwise the new position)
         let mut e_pos: Option<f64> = None;
+        if self.config.warped_chord {
+            let x_ref = self.precond_at.as_ref().unwrap_or(&self.model.mesh.rest);
+            self.warp
+                .update(&self.model.mesh.elements, x_ref, &self.pos);
+        } else {
+            self.warp.reset();
+        }
         for _ in 0..max_iter {
             stats.factorizations += self.ensure_precond(c_mass_pre, c_stiff_pre)?;
             stats.newton_iterations += 1;
@@ -1662,7 +1679,9 @@ impl FemSolid {
                 self.cg = cg;
                 stats.linear_iterations += res.iterations;
             } else {
+                self.warp.to_reference(&mut delta);
                 pre.solve_in_place(&mut delta);
+                self.warp.from_reference(&mut delta);
                 Self::apply_filter(&self.active, &mut delta);
                 stats.linear_iterations += 1;
             }
@@ -1717,6 +1736,7 @@ impl FemSolid {
                 self.precond_at = Some(self.pos.clone());
                 self.precond_gen += 1;
                 self.precond = None;
+                self.warp.reset();
                 refactored = true;
             } else if alpha == 0.0 {
                 return Ok(false);
