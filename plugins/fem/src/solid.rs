@@ -1641,6 +1641,13 @@ impl FemSolid {
             let x_ref = self.precond_at.as_ref().unwrap_or(&self.model.mesh.rest);
             self.warp
                 .update(&self.model.mesh.elements, x_ref, &self.pos);
+            // contact penalties sit in the factor along world normals: those nodes stay unturned
+            self.warp.unwarp(
+                self.active
+                    .iter()
+                    .filter(|c| matches!(c.kind, ConKind::Contact))
+                    .map(|c| c.node),
+            );
         } else {
             self.warp.reset();
         }
@@ -1666,9 +1673,16 @@ impl FemSolid {
                 let pat = &self.model.pattern;
                 let mat = &self.precond_mat;
                 let active = &self.active;
+                let warp = &self.warp;
+                // the line search's buffer is free until the line search
+                let mut tmp = std::mem::take(&mut self.trial);
                 let res = pcg(
-                    |v, y| pat.spmv(mat, v, y),
-                    |z| pre.solve_in_place(z),
+                    |v, y| warp.apply(v, y, &mut tmp, |u, out| pat.spmv(mat, u, out)),
+                    |z| {
+                        warp.to_reference(z);
+                        pre.solve_in_place(z);
+                        warp.from_reference(z);
+                    },
                     |v| Self::apply_filter(active, v),
                     &r,
                     &mut delta,
@@ -1676,6 +1690,7 @@ impl FemSolid {
                     self.config.linear_max_iterations,
                     &mut cg,
                 );
+                self.trial = tmp;
                 self.cg = cg;
                 stats.linear_iterations += res.iterations;
             } else {

@@ -17,9 +17,12 @@
 //! `R A^-1 R^T`: rotate a vector into the reference frame, solve with the factor, rotate back.
 //! Lumped masses and isotropic grasp springs are rotation invariant, so `R` only turns the
 //! elastic part (and the constraint penalties, which the solver's filter handles exactly).
-//! Iterations with active contacts are not warped: their filtered PCG works in the world frame
-//! with the contact penalties along world normals, and warping rotated the penalties away from
-//! the filtered directions (Spot Lift: 40 % more PCG iterations, 20 % slower).
+//! With active contacts the chord step is a filtered PCG on `R A R^T`, preconditioned by
+//! `R (A + P)^-1 R^T` where `P` holds the contact penalties along world normals: contact nodes
+//! keep `R_i = I` so that their penalties stay along the filtered directions (warping them too
+//! cost 40 % more PCG iterations in Spot Lift; leaving contact iterations unwarped kept a stale
+//! matrix there, and one Spot Drag expert episode (seed 6) then blew up where the belt met the
+//! post).
 //!
 //! `R_i` comes from an element that contains the node: elements are visited in order and each one
 //! that still has a node without a rotation computes its best-fit (Kabsch) rotation from its ten
@@ -116,6 +119,33 @@ impl Warp {
                 }
             }
         }
+    }
+
+    /// Gives `nodes` the identity (e.g. nodes with contact penalties along world normals).
+    pub(crate) fn unwarp(&mut self, nodes: impl Iterator<Item = u32>) {
+        for k in nodes {
+            if let Some(r) = self.rot.get_mut(k as usize) {
+                *r = Matrix3::identity();
+            }
+        }
+    }
+
+    /// `y = R A R^T v`, where `spmv(u, y)` computes `y = A u`; `tmp` is scratch of `v`'s length.
+    pub(crate) fn apply(
+        &self,
+        v: &[Vector3<f64>],
+        y: &mut [Vector3<f64>],
+        tmp: &mut [Vector3<f64>],
+        spmv: impl Fn(&[Vector3<f64>], &mut [Vector3<f64>]),
+    ) {
+        if self.rot.is_empty() {
+            spmv(v, y);
+            return;
+        }
+        tmp.copy_from_slice(v);
+        self.to_reference(tmp);
+        spmv(tmp, y);
+        self.from_reference(y);
     }
 
     /// Turns the warp off (the chord matrix is `A` itself), e.g. after a refactor at the current
