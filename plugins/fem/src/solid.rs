@@ -1717,6 +1717,10 @@ impl FemSolid {
                 };
                 let slope = -dot(&r, &delta);
                 let mut accepted = None;
+                // a warped step is taken whole or not at all: one that needs damping means the
+                // rotations do not fit this shape (a belt crushed by a fast box), and its damped
+                // version would move the state in a poor direction; the refactor below follows
+                let warped = self.warp.is_on();
                 for _ in 0..30 {
                     for i in 0..n {
                         trial[i] = self.pos[i] + delta[i] * alpha;
@@ -1724,6 +1728,9 @@ impl FemSolid {
                     let e1 = self.potential(p, &trial);
                     if e1.is_finite() && e1 <= e0 + 1e-4 * alpha * slope + 1e-12 * e0.abs() {
                         accepted = Some(e1);
+                        break;
+                    }
+                    if warped {
                         break;
                     }
                     alpha *= 0.5;
