@@ -1679,9 +1679,9 @@ impl FemSolid {
                 let res = pcg(
                     |v, y| warp.apply(v, y, &mut tmp, |u, out| pat.spmv(mat, u, out)),
                     |z| {
-                        warp.to_reference(z);
+                        warp.turn_back(z);
                         pre.solve_in_place(z);
-                        warp.from_reference(z);
+                        warp.turn(z);
                     },
                     |v| Self::apply_filter(active, v),
                     &r,
@@ -1694,9 +1694,9 @@ impl FemSolid {
                 self.cg = cg;
                 stats.linear_iterations += res.iterations;
             } else {
-                self.warp.to_reference(&mut delta);
+                self.warp.turn_back(&mut delta);
                 pre.solve_in_place(&mut delta);
-                self.warp.from_reference(&mut delta);
+                self.warp.turn(&mut delta);
                 Self::apply_filter(&self.active, &mut delta);
                 stats.linear_iterations += 1;
             }

@@ -150,9 +150,9 @@ impl Warp {
             return;
         }
         tmp.copy_from_slice(v);
-        self.to_reference(tmp);
+        self.turn_back(tmp);
         spmv(tmp, y);
-        self.from_reference(y);
+        self.turn(y);
     }
 
     /// Whether the rotations are in use (`false`: the chord matrix is `A` itself).
@@ -167,14 +167,14 @@ impl Warp {
     }
 
     /// `v <- R^T v` (into the reference frame).
-    pub(crate) fn to_reference(&self, v: &mut [Vector3<f64>]) {
+    pub(crate) fn turn_back(&self, v: &mut [Vector3<f64>]) {
         for (x, r) in v.iter_mut().zip(&self.rot) {
             *x = r.tr_mul(x);
         }
     }
 
     /// `v <- R v` (back to the current frame).
-    pub(crate) fn from_reference(&self, v: &mut [Vector3<f64>]) {
+    pub(crate) fn turn(&self, v: &mut [Vector3<f64>]) {
         for (x, r) in v.iter_mut().zip(&self.rot) {
             *x = r * *x;
         }
@@ -233,11 +233,11 @@ mod tests {
             .map(|i| Vector3::new(i as f64, 1.0, -0.5 * i as f64))
             .collect();
         let mut y = v.clone();
-        warp.to_reference(&mut y);
+        warp.turn_back(&mut y);
         for yi in y.iter_mut() {
             *yi = a * *yi;
         }
-        warp.from_reference(&mut y);
+        warp.turn(&mut y);
         let r = q.to_rotation_matrix();
         let want = r.matrix() * a * r.matrix().transpose();
         let want_y: Vec<_> = v.iter().map(|vi| want * vi).collect();
@@ -249,8 +249,8 @@ mod tests {
         );
         // into the reference frame and back is the identity
         let mut w = v.clone();
-        warp.to_reference(&mut w);
-        warp.from_reference(&mut w);
+        warp.turn_back(&mut w);
+        warp.turn(&mut w);
         let err = max_diff(&w, &v);
         assert!(err < 1e-8 * scale, "round trip error {err:e}");
         warp.reset();
