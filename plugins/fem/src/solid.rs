@@ -220,6 +220,8 @@ impl GraspParams {
 /// counts as one Newton iteration and one linear iteration (one triangular solve pair).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepStats {
+    /// Active-set rounds (Newton solves with one contact set) of the step.
+    pub active_set_rounds: usize,
     /// Newton iterations summed over the active-set rounds.
     pub newton_iterations: usize,
     /// PCG iterations summed over all Newton iterations.
@@ -325,6 +327,21 @@ struct Candidate {
     friction_force: Vector3<f64>,
     /// Unit direction of the kinetic friction force while sliding.
     slip_dir: Vector3<f64>,
+    /// The previous active-set round's (friction magnitude used, `mu * normal force` it gave),
+    /// for the secant update of a sliding contact's friction.
+    secant: Option<(f64, f64)>,
+}
+
+/// What an active contact ended a step with: the next step's contact on the same node and body
+/// starts from it (active, sticking or sliding the same way, friction from this normal force).
+/// Part of the state, so that a restored snapshot steps exactly as the original.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ContactMemory {
+    node: u32,
+    body: u32,
+    stick: bool,
+    slip_dir: Vector3<f64>,
+    normal_force: f64,
 }
 
 /// Coefficients of one incremental-potential solve.
@@ -340,8 +357,13 @@ struct Problem {
     gravity: Vector3<f64>,
 }
 
-/// Tangential speed (m/s) above which a contact starts a step sliding rather than sticking.
+/// Tangential speed (m/s) above which a contact starts a step sliding rather than sticking
+/// (raised, per contact, to the speed its kinetic friction would take away within the step).
 const SLIP_SPEED: f64 = 1e-3;
+
+/// Relative change of a sliding contact's kinetic friction force below which the active-set
+/// rounds accept it (besides the absolute force tolerance of the Newton solve).
+const FRICTION_RTOL: f64 = 2e-2;
 
 /// A node touches a collider only where its outward surface normal `s` faces the collider's
 /// outward normal `n`: `s . n < -FACING_COS` (about 3 degrees past perpendicular). Without this,
@@ -353,7 +375,8 @@ const FACING_COS: f64 = 0.05;
 /// How often a step whose solve fails may be halved (at most `2^MAX_STEP_HALVINGS` parts).
 const MAX_STEP_HALVINGS: u32 = 3;
 
-const STATE_MAGIC: f64 = 7.1e7 + 1.0; // format tag of get_state (version 1)
+const STATE_MAGIC_V1: f64 = 7.1e7 + 1.0; // format tag of get_state, version 1 (no contact memory)
+const STATE_MAGIC: f64 = 7.1e7 + 2.0; // format tag of get_state (version 2)
 
 /// A tetrahedral elastic solid with quadratic elements: model, state, constraints and solver.
 ///
@@ -409,6 +432,8 @@ pub struct FemSolid {
     /// Outward surface normals at the nodes at the start of the step.
     normals: Vec<Vector3<f64>>,
     con_forces: Vec<(u32, Vector3<f64>)>,
+    /// Active contacts at the end of the last step, by node (part of the state).
+    contact_memory: Vec<ContactMemory>,
     last_linear_iterations: usize,
     /// Rotations of the warped chord matrix (a cache of the state, see [`crate::warp`]).
     warp: Warp,
@@ -474,6 +499,7 @@ impl FemSolid {
             candidates: Vec::new(),
             normals: Vec::new(),
             con_forces: Vec::new(),
+            contact_memory: Vec::new(),
             last_linear_iterations: 0,
             warp: Warp::default(),
             model,
@@ -552,6 +578,7 @@ impl FemSolid {
         }
         self.pos.copy_from_slice(pos);
         self.vel.copy_from_slice(vel);
+        self.contact_memory.clear();
         Ok(())
     }
 
@@ -1929,6 +1956,7 @@ impl FemSolid {
                     }
                 };
                 Ok(StepStats {
+                    active_set_rounds: a.active_set_rounds + b.active_set_rounds,
                     newton_iterations: a.newton_iterations + b.newton_iterations,
                     linear_iterations: a.linear_iterations + b.linear_iterations,
                     factorizations: a.factorizations + b.factorizations,
@@ -1961,6 +1989,7 @@ impl FemSolid {
             .map(|g| (g.local.clone(), g.slip_distance))
             .collect();
         let precond_backup = self.precond_at.clone();
+        let memory_backup = self.contact_memory.clone();
         let result = self.step_inner(dt, t0, gravity, contacts, reactions);
         let failed = match &result {
             Ok(stats) => {
@@ -1995,6 +2024,7 @@ impl FemSolid {
             }
             self.precond_at = precond_backup;
             self.precond_gen += 1;
+            self.contact_memory = memory_backup;
             reactions.truncate(reactions_len);
             return Err(err);
         }
@@ -2072,30 +2102,57 @@ impl FemSolid {
                 let gap = (self.xhat[i as usize] - c.point).dot(&c.normal);
                 let t = x + c.velocity * dt;
                 let stick_target = t - c.normal * (t - c.point).dot(&c.normal);
-                // a node already sliding starts the step sliding (friction opposing its motion)
                 let vrel = self.vel[i as usize] - c.velocity;
                 let vt = vrel - c.normal * vrel.dot(&c.normal);
-                let sliding = vt.norm() > SLIP_SPEED;
+                let speed = vt.norm();
+                let mass = self.model.mass[i as usize];
+                // The last step's contact on this node and body (if any) is the first guess:
+                // active, its normal force, and sliding if it ended sliding (in its direction of
+                // motion, or the old one if it barely moves). A new contact's normal force is
+                // the one stopping the node's predicted penetration within the step.
+                let memory = self
+                    .contact_memory
+                    .binary_search_by_key(&i, |m| m.node)
+                    .ok()
+                    .map(|k| self.contact_memory[k])
+                    .filter(|m| m.body == c.body);
+                let normal_force = match memory {
+                    Some(m) => m.normal_force.max(0.0),
+                    None => mass * (-gap).max(0.0) * problem.c_mass,
+                };
+                // a node slower than its kinetic friction can stop within the step starts
+                // sticking (sliding, the friction would reverse it: one more round)
+                let stop_speed = c.friction * normal_force * dt / mass;
+                let sliding = match memory {
+                    Some(m) => !m.stick || speed > SLIP_SPEED.max(stop_speed),
+                    None => speed > SLIP_SPEED.max(stop_speed),
+                };
+                let slip_dir = match memory {
+                    Some(m) if !m.stick && speed <= SLIP_SPEED => m.slip_dir,
+                    _ if sliding => -vt / speed,
+                    _ => Vector3::zeros(),
+                };
                 self.candidates.push(Candidate {
                     node: i,
                     contact: c,
-                    active: gap < 0.0,
+                    // (a node that was touching and is predicted within the margin touches)
+                    active: gap < 0.0 || (memory.is_some() && gap < self.config.contact_margin),
                     stick: c.friction > 0.0 && !sliding,
                     stick_target,
-                    normal_force: 0.0,
-                    friction_force: Vector3::zeros(),
-                    slip_dir: if sliding {
-                        -vt / vt.norm()
-                    } else {
-                        Vector3::zeros()
-                    },
+                    normal_force,
+                    friction_force: slip_dir * (c.friction * normal_force),
+                    slip_dir,
+                    secant: None,
                 });
             }
         }
         // active-set rounds: contacts start sticking; a stuck contact whose tangential force
         // exceeds mu * normal force slides with kinetic friction mu * normal force opposing the
         // tendency; pulling (adhesive) contacts are released; penetrating ones activated
-        let pen_tol = 1e-9 * self.model.length_scale;
+        // Tolerances of the rounds match the Newton solve's: a penetration, an adhesive normal
+        // force or a change of kinetic friction smaller than what the solve resolves (its step
+        // tolerance, and that step's inertial force) starts no new round.
+        let pen_tol = self.config.newton_tolerance * self.model.length_scale;
         let max_rounds = 6;
         for round in 0..max_rounds {
             let last = round + 1 == max_rounds;
@@ -2112,6 +2169,7 @@ impl FemSolid {
                 self.pos[i] = self.xprev[i] + self.vprev[i] * dt;
             }
             self.build_active();
+            stats.active_set_rounds += 1;
             self.newton(
                 &problem,
                 self.config.newton_max_iterations,
@@ -2124,11 +2182,12 @@ impl FemSolid {
                 let c = self.candidates[ci];
                 let i = c.node as usize;
                 let nrm = c.contact.normal;
+                let force_tol = self.model.mass[i] * problem.c_mass * pen_tol;
                 if c.active {
                     let g = self.grad[i];
                     let lam = nrm.dot(&g);
                     self.candidates[ci].normal_force = lam;
-                    if lam < 0.0 {
+                    if lam < -force_tol {
                         if !last {
                             self.candidates[ci].active = false;
                             changed = true;
@@ -2143,6 +2202,7 @@ impl FemSolid {
                             cc.stick = false;
                             cc.slip_dir = ft / ft.norm();
                             cc.friction_force = cc.slip_dir * (mu * lam);
+                            cc.secant = None;
                             changed = true;
                         }
                     } else {
@@ -2156,11 +2216,21 @@ impl FemSolid {
                             cc.stick = true;
                             changed = true;
                         } else {
-                            let target = cc.slip_dir * (mu * lam);
-                            if (target - cc.friction_force).norm() > 1e-3 * target.norm() + 1e-12
-                                && !last
-                            {
-                                cc.friction_force = target;
+                            // kinetic friction f must equal mu * normal force, itself a function
+                            // of f: a secant step on f - mu * lam(f) once two rounds are known
+                            let f = cc.friction_force.dot(&cc.slip_dir);
+                            let target = mu * lam.max(0.0);
+                            let off = (target - f).abs();
+                            if off > (FRICTION_RTOL * target).max(force_tol) && !last {
+                                let next = match cc.secant {
+                                    Some((f0, t0)) if f != f0 => {
+                                        let slope = ((target - t0) / (f - f0)).clamp(-10.0, 0.5);
+                                        (f + (target - f) / (1.0 - slope)).max(0.0)
+                                    }
+                                    _ => target,
+                                };
+                                cc.secant = Some((f, target));
+                                cc.friction_force = cc.slip_dir * next;
                                 changed = true;
                             }
                         }
@@ -2171,6 +2241,7 @@ impl FemSolid {
                         let cc = &mut self.candidates[ci];
                         cc.active = true;
                         cc.stick = cc.contact.friction > 0.0;
+                        cc.secant = None;
                         changed = true;
                     }
                 }
@@ -2180,6 +2251,19 @@ impl FemSolid {
             }
         }
         self.record_constraint_forces();
+        self.contact_memory.clear();
+        for c in &self.candidates {
+            if c.active {
+                self.contact_memory.push(ContactMemory {
+                    node: c.node,
+                    body: c.contact.body,
+                    stick: c.stick,
+                    slip_dir: c.slip_dir,
+                    normal_force: c.normal_force,
+                });
+            }
+        }
+        self.contact_memory.sort_by_key(|m| m.node);
         // reactions of kinematic attachments
         for c in &self.active {
             if let ConKind::Attachment(ai) = c.kind {
@@ -2319,7 +2403,9 @@ impl FemSolid {
 
     /// Full dynamic state as a flat vector: positions, velocities, step count, external loads,
     /// world constraints, body poses, attachments, grasps (with slip state), the
-    /// preconditioner's reference shape and the Young's modulus scale. `set_state(get_state())` is a bit-exact round trip.
+    /// preconditioner's reference shape, the Young's modulus scale and the contacts the last step
+    /// ended with (the next step's first guess). `set_state(get_state())` is a bit-exact round
+    /// trip. [`FemSolid::set_state`] also reads the previous format (without the contacts).
     pub fn get_state(&self) -> Vec<f64> {
         let mut s = vec![
             STATE_MAGIC,
@@ -2377,13 +2463,24 @@ impl FemSolid {
             }
         }
         s.push(self.stiffness_scale);
+        s.push(self.contact_memory.len() as f64);
+        for m in &self.contact_memory {
+            s.extend_from_slice(&[
+                m.node as f64,
+                f64::from(m.body),
+                f64::from(u8::from(m.stick)),
+            ]);
+            push3(&mut s, &m.slip_dir);
+            s.push(m.normal_force);
+        }
         s
     }
 
     /// Restores a state produced by [`FemSolid::get_state`] of a solid with the same model.
     pub fn set_state(&mut self, state: &[f64]) -> Result<(), FemError> {
         let mut r = Reader { s: state, i: 0 };
-        if r.next()? != STATE_MAGIC {
+        let version = r.next()?;
+        if version != STATE_MAGIC && version != STATE_MAGIC_V1 {
             return Err(FemError::InvalidState(
                 "not a modesuite-fem state vector (bad tag)".into(),
             ));
@@ -2500,6 +2597,35 @@ impl FemSolid {
                 "stiffness scale {stiffness_scale}: finite and > 0"
             )));
         }
+        let mut contact_memory = Vec::new();
+        if version == STATE_MAGIC {
+            let count = r.count()?;
+            for _ in 0..count {
+                let node = r.node(n)?;
+                let body = r.next()?;
+                if !(body >= 0.0 && body <= f64::from(u32::MAX) && body.fract() == 0.0) {
+                    return Err(FemError::InvalidState(format!("contact body id {body}")));
+                }
+                let stick = r.next()? != 0.0;
+                let slip_dir = r.v3()?;
+                let normal_force = r.next()?;
+                if !(finite3(&slip_dir) && normal_force.is_finite()) {
+                    return Err(FemError::NonFiniteInput("contact memory"));
+                }
+                contact_memory.push(ContactMemory {
+                    node,
+                    body: body as u32,
+                    stick,
+                    slip_dir,
+                    normal_force,
+                });
+            }
+            if !contact_memory.windows(2).all(|w| w[0].node < w[1].node) {
+                return Err(FemError::InvalidState(
+                    "contact memory: nodes not in increasing order".into(),
+                ));
+            }
+        }
         if r.i != state.len() {
             return Err(FemError::InvalidState(format!(
                 "{} trailing values",
@@ -2518,6 +2644,7 @@ impl FemSolid {
         self.precond_at = precond_at;
         self.precond_gen += 1;
         self.stiffness_scale = stiffness_scale;
+        self.contact_memory = contact_memory;
         self.precond = None;
         self.constraint_version += 1;
         self.refresh_grasp_anchors();
@@ -2555,5 +2682,64 @@ impl Reader<'_> {
             return Err(FemError::InvalidState(format!("node {v} out of range")));
         }
         Ok(v as u32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::coupling::HalfSpace;
+    use crate::testing::box_mesh;
+
+    fn block_on_floor() -> FemSolid {
+        let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.2, 0.04, 0.04), [4, 1, 1]);
+        let material = Material::new(1e5, 0.35, 200.0).unwrap();
+        FemSolid::new(&nodes, &tets, material, FemConfig::default()).unwrap()
+    }
+
+    #[test]
+    fn the_state_keeps_the_contact_memory_and_reads_the_old_format() {
+        let floor = HalfSpace {
+            origin: Vector3::zeros(),
+            normal: Vector3::z(),
+            friction: 0.5,
+            body: 3,
+            velocity: Vector3::zeros(),
+        };
+        let mut a = block_on_floor();
+        let vel = vec![Vector3::new(0.3, 0.0, 0.0); a.n_nodes()];
+        let pos = a.positions().to_vec();
+        a.set_positions_velocities(&pos, &vel).unwrap();
+        let mut reactions = Vec::new();
+        for _ in 0..5 {
+            a.step(
+                1.0 / 60.0,
+                Vector3::new(0.0, 0.0, -9.81),
+                &floor,
+                &mut reactions,
+            )
+            .unwrap();
+        }
+        let k = a.contact_memory.len();
+        assert!(k > 0, "the block rests on the floor");
+        assert!(a.contact_memory.iter().any(|m| !m.stick), "and slides");
+        let state = a.get_state();
+        let mut b = block_on_floor();
+        b.set_state(&state).unwrap();
+        assert_eq!(b.contact_memory, a.contact_memory);
+        // version 1: the same without the memory (a restored solid starts from scratch)
+        let mut v1 = state[..state.len() - 1 - 7 * k].to_vec();
+        v1[0] = STATE_MAGIC_V1;
+        let mut c = block_on_floor();
+        c.set_state(&v1).unwrap();
+        assert!(c.contact_memory.is_empty());
+        assert_eq!(c.positions(), a.positions());
+        // a version-1 tag with the memory appended is trailing data
+        let mut bad = state.clone();
+        bad[0] = STATE_MAGIC_V1;
+        assert!(matches!(b.set_state(&bad), Err(FemError::InvalidState(_))));
+        // setting positions by hand forgets the contacts
+        b.set_positions_velocities(&pos, &vel).unwrap();
+        assert!(b.contact_memory.is_empty());
     }
 }
