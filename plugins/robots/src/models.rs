@@ -1,7 +1,7 @@
 //! The project's two robots: where their URDFs are, how they are mounted, their named poses and
 //! joint groups.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use modesuite_engine::deps::nalgebra::Isometry3;
 use modesuite_engine::RigidContext;
@@ -9,7 +9,7 @@ use modesuite_engine::RigidContext;
 use crate::control::JointGains;
 use crate::error::RobotError;
 use crate::robot::{spawn_robot, Robot, RootMount, SpawnOptions};
-use crate::urdf::{read_urdf, AssetPaths, UrdfModel};
+use crate::urdf::{parse_urdf, AssetPaths, UrdfModel};
 
 /// Which robot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -29,6 +29,9 @@ pub struct RobotSpec {
     pub id: &'static str,
     /// URDF path relative to `assets/robots/`.
     pub urdf: &'static str,
+    /// The URDF's text, built into the binary (a build or a checkout moved after building
+    /// still loads its models).
+    pub urdf_text: &'static str,
     /// Root mount.
     pub root: RootMount,
     /// Height of the root frame above the floor in the home pose, m.
@@ -88,6 +91,9 @@ impl RobotSpec {
                 kind,
                 id: "franka",
                 urdf: "franka_ridgeback/franka_ridgeback.urdf",
+                urdf_text: include_str!(
+                    "../../../assets/robots/franka_ridgeback/franka_ridgeback.urdf"
+                ),
                 root: RootMount::Fixed,
                 root_height: 0.0,
                 base_joints: Some(["base_x", "base_y", "base_yaw"]),
@@ -110,6 +116,7 @@ impl RobotSpec {
                 kind,
                 id: "spot",
                 urdf: "spot_arm/spot_arm.urdf",
+                urdf_text: include_str!("../../../assets/robots/spot_arm/spot_arm.urdf"),
                 root: RootMount::Floating,
                 root_height: 0.55,
                 base_joints: None,
@@ -135,16 +142,20 @@ impl RobotSpec {
         }
     }
 
-    /// Path of the URDF inside `assets` (the `package://modesuite_robots/` package).
+    /// Path of the URDF inside `assets` (the `package://modesuite_robots/` package) where this
+    /// binary was built; [`RobotSpec::load`] reads the copy built into the binary.
     pub fn urdf_path(&self) -> PathBuf {
         PathBuf::from(env!("CARGO_MANIFEST_DIR"))
             .join("../../assets/robots")
             .join(self.urdf)
     }
 
-    /// Reads and validates the URDF.
+    /// Parses and validates the built-in URDF text (named by [`RobotSpec::urdf_path`] in
+    /// messages; relative mesh paths would start from its folder).
     pub fn load(&self, assets: &AssetPaths) -> Result<UrdfModel, RobotError> {
-        read_urdf(&self.urdf_path(), assets)
+        let path = self.urdf_path();
+        let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        parse_urdf(self.urdf_text, &path.display().to_string(), &base, assets)
     }
 
     /// Builds the robot in its home pose with its root at `pose` (the floor point under the root
