@@ -365,6 +365,17 @@ impl SolidModel {
         self.eval_gradient(x, grad, damping, false).inverted
     }
 
+    /// Elastic energy and gradient in one pass (N, written into `grad`): the energy is bitwise
+    /// that of [`SolidModel::energy_only`] and the gradient that of [`SolidModel::gradient`].
+    pub fn energy_gradient(
+        &self,
+        x: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        damping: Option<(&[Vector3<f64>], f64)>,
+    ) -> KernelStats {
+        self.eval_gradient(x, grad, damping, true)
+    }
+
     /// [`SolidModel::eval`] without the Hessian: gradient, and the energy when `with_energy`.
     fn eval_gradient(
         &self,
@@ -406,5 +417,46 @@ impl SolidModel {
             }
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::testing::box_mesh;
+    use crate::{FemConfig, FemSolid, Material};
+    use nalgebra::Vector3;
+
+    #[test]
+    fn energy_gradient_is_bitwise_energy_only_and_gradient() {
+        let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.3, 0.05, 0.02), [6, 1, 1]);
+        let material = Material::new(2e5, 0.45, 1100.0).unwrap();
+        let s = FemSolid::new(&nodes, &tets, material, FemConfig::default()).unwrap();
+        let m = s.model();
+        let rest = s.rest_positions();
+        // bent and squeezed, one element inverted
+        let mut x: Vec<Vector3<f64>> = rest
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let t = (i as f64 * 0.37).sin();
+                Vector3::new(p.x, p.y * (1.0 - 0.3 * t), p.z + 0.4 * p.x * p.x)
+            })
+            .collect();
+        x[0] = rest[1] + Vector3::new(0.02, 0.0, 0.0);
+        for damping in [None, Some((rest, 0.3))] {
+            let mut g1 = vec![Vector3::zeros(); x.len()];
+            let mut g2 = vec![Vector3::zeros(); x.len()];
+            let fused = m.energy_gradient(&x, &mut g1, damping);
+            let energy = m.energy_only(&x, damping);
+            let inverted = m.gradient(&x, &mut g2, damping);
+            assert_eq!(fused.energy.to_bits(), energy.energy.to_bits());
+            assert_eq!(fused.inverted, energy.inverted);
+            assert_eq!(fused.inverted, inverted);
+            assert!(inverted > 0, "the test shape has inverted points");
+            assert!(g1.iter().zip(&g2).all(|(a, b)| a
+                .iter()
+                .zip(b.iter())
+                .all(|(u, v)| u.to_bits() == v.to_bits())));
+        }
     }
 }

@@ -434,6 +434,13 @@ pub struct FemSolid {
     con_forces: Vec<(u32, Vector3<f64>)>,
     /// Active contacts at the end of the last step, by node (part of the state).
     contact_memory: Vec<ContactMemory>,
+    /// Elastic and full gradient at a line search's first trial point (swapped into `egrad` and
+    /// `grad` when the trial is taken).
+    trial_egrad: Vec<Vector3<f64>>,
+    trial_grad: Vec<Vector3<f64>>,
+    /// Set by the chord solver when it returns with `grad` already evaluated at `pos` (the
+    /// inverted count of that evaluation); taken by the caller instead of a new evaluation.
+    grad_at_pos: Option<usize>,
     last_linear_iterations: usize,
     /// Rotations of the warped chord matrix (a cache of the state, see [`crate::warp`]).
     warp: Warp,
@@ -500,6 +507,9 @@ impl FemSolid {
             normals: Vec::new(),
             con_forces: Vec::new(),
             contact_memory: Vec::new(),
+            trial_egrad: vec![Vector3::zeros(); n],
+            trial_grad: vec![Vector3::zeros(); n],
+            grad_at_pos: None,
             last_linear_iterations: 0,
             warp: Warp::default(),
             model,
@@ -1373,7 +1383,12 @@ impl FemSolid {
     /// Total incremental potential at `x`.
     fn potential(&self, p: &Problem, x: &[Vector3<f64>]) -> f64 {
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-        let mut e = self.model.energy_only(x, damping).energy * self.stiffness_scale;
+        self.potential_with(p, x, self.model.energy_only(x, damping).energy)
+    }
+
+    /// The incremental potential at `x` given its (unscaled) elastic energy.
+    fn potential_with(&self, p: &Problem, x: &[Vector3<f64>], elastic: f64) -> f64 {
+        let mut e = elastic * self.stiffness_scale;
         for i in 0..self.n_nodes() {
             let m = self.model.mass[i];
             if p.c_mass > 0.0 {
@@ -1678,10 +1693,16 @@ impl FemSolid {
         } else {
             self.warp.reset();
         }
+        self.grad_at_pos = None;
+        // `Some(inverted)`: `grad` holds the gradient at `pos` (evaluated with the line search's
+        // first trial, which became `pos`)
+        let mut grad_ready: Option<usize> = None;
         for _ in 0..max_iter {
             stats.factorizations += self.ensure_precond(c_mass_pre, c_stiff_pre)?;
             stats.newton_iterations += 1;
-            self.final_gradient(p);
+            if grad_ready.take().is_none() {
+                self.final_gradient(p);
+            }
             let mut delta = std::mem::take(&mut self.delta);
             for (d, g) in delta.iter_mut().zip(&self.grad) {
                 *d = -*g;
@@ -1748,11 +1769,30 @@ impl FemSolid {
                 // rotations do not fit this shape (a belt crushed by a fast box), and its damped
                 // version would move the state in a poor direction; the refactor below follows
                 let warped = self.warp.is_on();
-                for _ in 0..30 {
+                for k in 0..30 {
                     for i in 0..n {
                         trial[i] = self.pos[i] + delta[i] * alpha;
                     }
-                    let e1 = self.potential(p, &trial);
+                    // the full step (usually taken) evaluates the gradient with the energy, in
+                    // one pass: the next iteration's gradient if the step is accepted
+                    let e1 = if k == 0 {
+                        let mut egrad = std::mem::take(&mut self.trial_egrad);
+                        let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
+                        let st = self.model.energy_gradient(&trial, &mut egrad, damping);
+                        let k_scale = self.stiffness_scale;
+                        if k_scale != 1.0 {
+                            egrad.iter_mut().for_each(|g| *g *= k_scale);
+                        }
+                        let mut grad = std::mem::take(&mut self.trial_grad);
+                        self.assemble_gradient(p, &trial, &egrad, &mut grad);
+                        self.trial_egrad = egrad;
+                        self.trial_grad = grad;
+                        grad_ready = Some(st.inverted);
+                        self.potential_with(p, &trial, st.energy)
+                    } else {
+                        grad_ready = None;
+                        self.potential(p, &trial)
+                    };
                     if e1.is_finite() && e1 <= e0 + 1e-4 * alpha * slope + 1e-12 * e0.abs() {
                         accepted = Some(e1);
                         break;
@@ -1775,9 +1815,17 @@ impl FemSolid {
                 self.pos[i] += delta[i] * alpha;
             }
             self.delta = delta;
+            if alpha == 1.0 && grad_ready.is_some() {
+                // `pos` is bitwise the first trial point
+                std::mem::swap(&mut self.egrad, &mut self.trial_egrad);
+                std::mem::swap(&mut self.grad, &mut self.trial_grad);
+            } else {
+                grad_ready = None;
+            }
             let moved = step_max * alpha;
             if alpha > 0.0 && moved <= tol_x || step_max <= tol_x {
                 stats.converged = true;
+                self.grad_at_pos = grad_ready;
                 return Ok(true);
             }
             if (alpha < 1.0 || moved > 0.5 * prev_step) && !refactored {
@@ -1797,28 +1845,36 @@ impl FemSolid {
 
     /// Gradient of the potential at the current positions (for constraint forces), into `self.grad`.
     fn final_gradient(&mut self, p: &Problem) -> usize {
-        let n = self.n_nodes();
         let mut egrad = std::mem::take(&mut self.egrad);
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
         let inverted = self.eval_elastic(&mut egrad, None, false, damping);
         let mut grad = std::mem::take(&mut self.grad);
-        for i in 0..n {
-            let m = self.model.mass[i];
-            let mut g = egrad[i] - self.ext_force[i] - self.fric[i] - p.gravity * m;
-            if p.c_mass > 0.0 {
-                g += (self.pos[i] - self.xhat[i]) * (m * p.c_mass);
-            }
-            if p.c_damp > 0.0 {
-                g += (self.pos[i] - self.xprev[i]) * (m * p.c_damp);
-            }
-            grad[i] = g;
-        }
-        let pos = std::mem::take(&mut self.pos);
-        self.grasp_energy_grad(&pos, Some(&mut grad));
-        self.pos = pos;
+        self.assemble_gradient(p, &self.pos, &egrad, &mut grad);
         self.egrad = egrad;
         self.grad = grad;
         inverted
+    }
+
+    /// The incremental potential's gradient at `x` from the (scaled) elastic one.
+    fn assemble_gradient(
+        &self,
+        p: &Problem,
+        x: &[Vector3<f64>],
+        egrad: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+    ) {
+        for i in 0..self.n_nodes() {
+            let m = self.model.mass[i];
+            let mut g = egrad[i] - self.ext_force[i] - self.fric[i] - p.gravity * m;
+            if p.c_mass > 0.0 {
+                g += (x[i] - self.xhat[i]) * (m * p.c_mass);
+            }
+            if p.c_damp > 0.0 {
+                g += (x[i] - self.xprev[i]) * (m * p.c_damp);
+            }
+            grad[i] = g;
+        }
+        self.grasp_energy_grad(x, Some(grad));
     }
 
     fn refresh_grasp_anchors(&mut self) {
@@ -2176,7 +2232,10 @@ impl FemSolid {
                 true,
                 &mut stats,
             )?;
-            stats.inverted = self.final_gradient(&problem);
+            stats.inverted = match self.grad_at_pos.take() {
+                Some(inverted) => inverted,
+                None => self.final_gradient(&problem),
+            };
             let mut changed = false;
             for ci in 0..self.candidates.len() {
                 let c = self.candidates[ci];
