@@ -2188,6 +2188,8 @@ impl FemSolid {
                     _ if sliding => -vt / speed,
                     _ => Vector3::zeros(),
                 };
+                // (a remembered frictionless slide has no direction: with friction now, stick)
+                let sliding = sliding && slip_dir != Vector3::zeros();
                 self.candidates.push(Candidate {
                     node: i,
                     contact: c,
@@ -2800,5 +2802,40 @@ mod tests {
         // setting positions by hand forgets the contacts
         b.set_positions_velocities(&pos, &vel).unwrap();
         assert!(b.contact_memory.is_empty());
+    }
+
+    #[test]
+    fn a_remembered_frictionless_slide_sticks_once_the_surface_has_friction() {
+        let floor = |friction| HalfSpace {
+            origin: Vector3::zeros(),
+            normal: Vector3::z(),
+            friction,
+            body: 3,
+            velocity: Vector3::zeros(),
+        };
+        let g = Vector3::new(0.0, 0.0, -9.81);
+        let mut s = block_on_floor();
+        let mut reactions = Vec::new();
+        for _ in 0..10 {
+            s.step(1.0 / 60.0, g, &floor(0.0), &mut reactions).unwrap();
+        }
+        // resting on a frictionless floor: sliding contacts, most without a direction
+        let mem = &s.contact_memory;
+        assert!(!mem.is_empty() && mem.iter().all(|m| !m.stick));
+        assert!(mem.iter().any(|m| m.slip_dir == Vector3::zeros()));
+        // friction 0.5 and a push of 0.2 times the weight: static friction holds the block
+        let push: Vec<Vector3<f64>> = s
+            .masses()
+            .iter()
+            .map(|m| Vector3::new(0.2 * 9.81 * m, 0.0, 0.0))
+            .collect();
+        s.set_external_forces(&push).unwrap();
+        let x0 = s.positions()[0];
+        for _ in 0..10 {
+            s.step(1.0 / 60.0, g, &floor(0.5), &mut reactions).unwrap();
+        }
+        let moved = (s.positions()[0] - x0).x.abs();
+        println!("slide along the push: {moved:e} m (< 1e-6)");
+        assert!(moved < 1e-6);
     }
 }
