@@ -59,7 +59,7 @@ use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::element::{shape_values, NQ};
 use crate::error::FemError;
 use crate::material::Material;
-use crate::model::SolidModel;
+use crate::model::{KernelStats, SolidModel};
 use crate::precond::{ContactFactor, Penalty};
 use crate::sparse::{dot, pcg, ProfileCholesky};
 use crate::warp::Warp;
@@ -1352,30 +1352,24 @@ impl FemSolid {
         e
     }
 
-    /// Elastic (and stiffness-damping) gradient and, if asked, Hessian at the current positions,
-    /// scaled by this solid's Young's modulus over the model's; returns the number of inverted
-    /// quadrature points.
+    /// Elastic (and stiffness-damping) gradient and Hessian at the current positions, scaled by
+    /// this solid's Young's modulus over the model's; returns the number of inverted quadrature
+    /// points.
     fn eval_elastic(
         &self,
         grad: &mut [Vector3<f64>],
-        mut hess: Option<&mut [Matrix3<f64>]>,
+        hess: &mut [Matrix3<f64>],
         project: bool,
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> usize {
-        let inverted = match hess.as_deref_mut() {
-            Some(h) => {
-                self.model
-                    .eval(&self.pos, grad, Some(h), project, damping)
-                    .inverted
-            }
-            None => self.model.gradient(&self.pos, grad, damping),
-        };
+        let inverted = self
+            .model
+            .eval(&self.pos, grad, Some(&mut *hess), project, damping)
+            .inverted;
         let k = self.stiffness_scale;
         if k != 1.0 {
             grad.iter_mut().for_each(|g| *g *= k);
-            if let Some(h) = hess {
-                h.iter_mut().for_each(|b| *b *= k);
-            }
+            hess.iter_mut().for_each(|b| *b *= k);
         }
         inverted
     }
@@ -1413,6 +1407,8 @@ impl FemSolid {
         let n = self.n_nodes();
         let tol_x = self.config.newton_tolerance * self.model.length_scale;
         stats.converged = false;
+        // set only by a chord solve that ends with the gradient at `pos` evaluated
+        self.grad_at_pos = None;
         let c_stiff_pre = 1.0 + p.c_kdamp;
         let c_mass_pre = p.c_mass + p.c_damp;
         // constrained components to targets
@@ -1431,23 +1427,10 @@ impl FemSolid {
             let mut egrad = std::mem::take(&mut self.egrad);
             let mut hess = std::mem::take(&mut self.hess);
             let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-            self.eval_elastic(&mut egrad, Some(&mut hess), project, damping);
+            self.eval_elastic(&mut egrad, &mut hess, project, damping);
             // gradient
             let mut grad = std::mem::take(&mut self.grad);
-            for i in 0..n {
-                let m = self.model.mass[i];
-                let mut g = egrad[i] - self.ext_force[i] - self.fric[i] - p.gravity * m;
-                if p.c_mass > 0.0 {
-                    g += (self.pos[i] - self.xhat[i]) * (m * p.c_mass);
-                }
-                if p.c_damp > 0.0 {
-                    g += (self.pos[i] - self.xprev[i]) * (m * p.c_damp);
-                }
-                grad[i] = g;
-            }
-            let pos_snapshot = std::mem::take(&mut self.pos);
-            self.grasp_energy_grad(&pos_snapshot, Some(&mut grad));
-            self.pos = pos_snapshot;
+            self.assemble_gradient(p, &self.pos, &egrad, &mut grad);
             let pat = &self.model.pattern;
             for i in 0..n {
                 let m = self.model.mass[i];
@@ -1693,7 +1676,6 @@ impl FemSolid {
         } else {
             self.warp.reset();
         }
-        self.grad_at_pos = None;
         // `Some(inverted)`: `grad` holds the gradient at `pos` (evaluated with the line search's
         // first trial, which became `pos`)
         let mut grad_ready: Option<usize> = None;
@@ -1777,14 +1759,8 @@ impl FemSolid {
                     // one pass: the next iteration's gradient if the step is accepted
                     let e1 = if k == 0 {
                         let mut egrad = std::mem::take(&mut self.trial_egrad);
-                        let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-                        let st = self.model.energy_gradient(&trial, &mut egrad, damping);
-                        let k_scale = self.stiffness_scale;
-                        if k_scale != 1.0 {
-                            egrad.iter_mut().for_each(|g| *g *= k_scale);
-                        }
                         let mut grad = std::mem::take(&mut self.trial_grad);
-                        self.assemble_gradient(p, &trial, &egrad, &mut grad);
+                        let st = self.gradient_at(p, &trial, &mut egrad, &mut grad, true);
                         self.trial_egrad = egrad;
                         self.trial_grad = grad;
                         grad_ready = Some(st.inverted);
@@ -1846,13 +1822,49 @@ impl FemSolid {
     /// Gradient of the potential at the current positions (for constraint forces), into `self.grad`.
     fn final_gradient(&mut self, p: &Problem) -> usize {
         let mut egrad = std::mem::take(&mut self.egrad);
-        let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-        let inverted = self.eval_elastic(&mut egrad, None, false, damping);
         let mut grad = std::mem::take(&mut self.grad);
-        self.assemble_gradient(p, &self.pos, &egrad, &mut grad);
+        let inverted = self
+            .gradient_at(p, &self.pos, &mut egrad, &mut grad, false)
+            .inverted;
         self.egrad = egrad;
         self.grad = grad;
         inverted
+    }
+
+    /// [`FemSolid::final_gradient`] after a Newton solve: the chord's own evaluation at `pos`
+    /// when it left one, else a new one.
+    fn gradient_after_solve(&mut self, p: &Problem) -> usize {
+        match self.grad_at_pos.take() {
+            Some(inverted) => inverted,
+            None => self.final_gradient(p),
+        }
+    }
+
+    /// The incremental potential's gradient at `x` into `grad` (its elastic part, scaled, into
+    /// `egrad`), with the unscaled elastic energy when `with_energy` (else 0).
+    fn gradient_at(
+        &self,
+        p: &Problem,
+        x: &[Vector3<f64>],
+        egrad: &mut [Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        with_energy: bool,
+    ) -> KernelStats {
+        let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
+        let stats = if with_energy {
+            self.model.energy_gradient(x, egrad, damping)
+        } else {
+            KernelStats {
+                energy: 0.0,
+                inverted: self.model.gradient(x, egrad, damping),
+            }
+        };
+        let k = self.stiffness_scale;
+        if k != 1.0 {
+            egrad.iter_mut().for_each(|g| *g *= k);
+        }
+        self.assemble_gradient(p, x, egrad, grad);
+        stats
     }
 
     /// The incremental potential's gradient at `x` from the (scaled) elastic one.
@@ -2179,12 +2191,10 @@ impl FemSolid {
                 // a node slower than its kinetic friction can stop within the step starts
                 // sticking (sliding, the friction would reverse it: one more round)
                 let stop_speed = c.friction * normal_force * dt / mass;
-                let sliding = match memory {
-                    Some(m) => !m.stick || speed > SLIP_SPEED.max(stop_speed),
-                    None => speed > SLIP_SPEED.max(stop_speed),
-                };
-                let slip_dir = match memory {
-                    Some(m) if !m.stick && speed <= SLIP_SPEED => m.slip_dir,
+                let remembered_slip = memory.filter(|m| !m.stick).map(|m| m.slip_dir);
+                let sliding = remembered_slip.is_some() || speed > SLIP_SPEED.max(stop_speed);
+                let slip_dir = match remembered_slip {
+                    Some(d) if speed <= SLIP_SPEED => d,
                     _ if sliding => -vt / speed,
                     _ => Vector3::zeros(),
                 };
@@ -2234,10 +2244,7 @@ impl FemSolid {
                 true,
                 &mut stats,
             )?;
-            stats.inverted = match self.grad_at_pos.take() {
-                Some(inverted) => inverted,
-                None => self.final_gradient(&problem),
-            };
+            stats.inverted = self.gradient_after_solve(&problem);
             let mut changed = false;
             for ci in 0..self.candidates.len() {
                 let c = self.candidates[ci];
@@ -2418,7 +2425,7 @@ impl FemSolid {
                 max_speed: f64::INFINITY,
             });
         }
-        stats.inverted = self.final_gradient(&p);
+        stats.inverted = self.gradient_after_solve(&p);
         self.record_constraint_forces();
         self.finish_grasps(1.0, None);
         self.vel.iter_mut().for_each(|v| *v = Vector3::zeros());
