@@ -287,6 +287,16 @@ fn bad_input_is_reported_with_object_field_and_value() {
         "finite",
     );
     expect_semantic("Scene(episode_steps: Some(0))", "episode_steps", "positive");
+    expect_semantic(
+        "Scene(physics: (substeps: 4, deformable_substeps: Some(3)))",
+        "physics.deformable_substeps",
+        "divisor of physics.substeps (4)",
+    );
+    expect_semantic(
+        "Scene(physics: (substeps: 4, deformable_substeps: Some(0)))",
+        "physics.deformable_substeps",
+        "positive divisor",
+    );
     // A float where an integer is expected gets a hint.
     let e = compile_text("Scene(physics: (substeps: 2.5))").unwrap_err();
     println!("{e}");

@@ -117,6 +117,10 @@ pub struct SimSettings {
     pub gravity: nalgebra::Vector3<f64>,
     /// Internal solver substeps of each rapier step.
     pub rigid_iterations: u32,
+    /// Substeps per deformable step (1: every substep; the scene's `physics.substeps /
+    /// physics.deformable_substeps`): deformable bodies step at the first substep of every
+    /// `deformable_stride`, over that many substeps' time, before the rigid world's substep.
+    pub deformable_stride: u32,
 }
 
 impl Default for SimSettings {
@@ -127,6 +131,7 @@ impl Default for SimSettings {
             decimation: 1,
             gravity: nalgebra::Vector3::new(0.0, 0.0, -9.81),
             rigid_iterations: 4,
+            deformable_stride: 1,
         }
     }
 }

@@ -258,9 +258,16 @@ fn deformable_step<S: DeformableSolver>(
     mut errors: ResMut<SimErrors>,
     names: Query<&Object>,
 ) {
-    let dt = settings.substep_dt();
+    // Substep index within the physics step; deformables step at the first of every stride.
+    let index = clock.substeps % u64::from(settings.substeps.max(1));
+    let stride = u64::from(settings.deformable_stride.max(1));
+    if index % stride != 0 {
+        return;
+    }
+    let h = settings.substep_dt();
+    let dt = h * stride as f64;
     // Time at the start of this substep: the physics step's start plus the substeps done in it.
-    let time = clock.time + (clock.substeps % u64::from(settings.substeps.max(1))) as f64 * dt;
+    let time = clock.time + index as f64 * h;
     let mut reactions: Vec<Reaction> = Vec::new();
     let mut empty = PluginStates::default();
     let mut buffer = Vec::new();

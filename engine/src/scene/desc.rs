@@ -133,6 +133,11 @@ pub struct PhysicsDesc {
     /// take `substeps` use 1.
     #[serde(default = "four")]
     pub rigid_iterations: u32,
+    /// Deformable steps per physics step (default: `substeps`). A divisor of `substeps`:
+    /// deformable bodies (FEM, cloth) then step every `substeps / deformable_substeps` rigid
+    /// substeps, over that much time, while the rigid world (robots) keeps its finer substeps.
+    #[serde(default)]
+    pub deformable_substeps: Option<u32>,
 }
 
 fn four() -> u32 {
@@ -147,6 +152,7 @@ impl Default for PhysicsDesc {
             decimation: 1,
             gravity: default_gravity(),
             rigid_iterations: 4,
+            deformable_substeps: None,
         }
     }
 }

@@ -288,6 +288,18 @@ fn validate_physics(p: &PhysicsDesc) -> Result<(), SceneError> {
             "an integer in 1..=1000",
         ));
     }
+    if let Some(d) = p.deformable_substeps {
+        if d == 0 || p.substeps % d != 0 {
+            return Err(SceneError::semantic(
+                "physics.deformable_substeps",
+                d.to_string(),
+                format!(
+                    "a positive divisor of physics.substeps ({}), or leave it out for one deformable step per substep",
+                    p.substeps
+                ),
+            ));
+        }
+    }
     if !(1..=100).contains(&p.rigid_iterations) {
         return Err(SceneError::semantic(
             "physics.rigid_iterations",
@@ -468,6 +480,10 @@ fn compile_inner(
         decimation: desc.physics.decimation,
         gravity: desc::gravity_of(&desc.physics),
         rigid_iterations: desc.physics.rigid_iterations,
+        deformable_stride: desc
+            .physics
+            .deformable_substeps
+            .map_or(1, |d| desc.physics.substeps / d),
     };
     if let Some(0) = desc.episode_steps {
         return Err(SceneError::semantic(
