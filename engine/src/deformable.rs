@@ -261,7 +261,7 @@ fn deformable_step<S: DeformableSolver>(
     // Substep index within the physics step; deformables step at the first of every stride.
     let index = clock.substeps % u64::from(settings.substeps.max(1));
     let stride = u64::from(settings.deformable_stride.max(1));
-    if index % stride != 0 {
+    if !index.is_multiple_of(stride) {
         return;
     }
     let h = settings.substep_dt();

@@ -289,7 +289,7 @@ fn validate_physics(p: &PhysicsDesc) -> Result<(), SceneError> {
         ));
     }
     if let Some(d) = p.deformable_substeps {
-        if d == 0 || p.substeps % d != 0 {
+        if d == 0 || !p.substeps.is_multiple_of(d) {
             return Err(SceneError::semantic(
                 "physics.deformable_substeps",
                 d.to_string(),
