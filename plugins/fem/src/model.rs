@@ -24,6 +24,9 @@ pub struct SolidModel {
     pub qp_grad: Vec<[Vector3<f64>; 10]>,
     /// Quadrature weight times element rest volume (m^3), `[element * NQ + q]`.
     pub qp_weight: Vec<f64>,
+    /// `qp_grad` and `qp_weight` with the quadrature points innermost (one lane each), for the
+    /// gradient kernel that evaluates an element's four points at once.
+    lanes: Vec<ElementLanes>,
     /// Rest volume of each element (m^3).
     pub volume: Vec<f64>,
     /// Node-block sparsity pattern of the stiffness matrix.
@@ -80,6 +83,160 @@ fn interpolate(xe: &[Vector3<f64>; 10], g: &[Vector3<f64>; 10]) -> Matrix3<f64> 
     )
 }
 
+// The lane kernel evaluates the four quadrature points of an element side by side.
+const _: () = assert!(NQ == 4);
+
+/// Nodes of an element padded to a multiple of four lanes.
+const NODE_LANES: usize = 12;
+
+/// One element's quadrature data in two layouts: `g[a][j][q]` is component `j` of the
+/// shape-function gradient of node `a` at point `q` (points innermost, for `F`), `gq[q][j][a]` the
+/// same with the nodes innermost (zero-padded, for the node forces); `w[q]` the weight times the
+/// rest volume.
+#[derive(Clone, Debug)]
+struct ElementLanes {
+    g: [[[f64; NQ]; 3]; 10],
+    gq: [[[f64; NODE_LANES]; 3]; NQ],
+    w: [f64; NQ],
+}
+
+impl ElementLanes {
+    fn new(grads: &[[Vector3<f64>; 10]], weights: &[f64]) -> Self {
+        let mut g = [[[0.0; NQ]; 3]; 10];
+        let mut gq = [[[0.0; NODE_LANES]; 3]; NQ];
+        for (q, grad_q) in grads.iter().enumerate() {
+            for (a, ga) in grad_q.iter().enumerate() {
+                for j in 0..3 {
+                    g[a][j][q] = ga[j];
+                    gq[q][j][a] = ga[j];
+                }
+            }
+        }
+        let mut w = [0.0; NQ];
+        w.copy_from_slice(weights);
+        ElementLanes { g, gq, w }
+    }
+}
+
+type Lanes = [f64; NQ];
+
+#[inline(always)]
+fn per_lane(f: impl Fn(usize) -> f64) -> Lanes {
+    [f(0), f(1), f(2), f(3)]
+}
+
+/// Elastic gradient (and energy when `with_energy`) without damping, four quadrature points per
+/// pass; every lane performs the operations of the scalar kernel ([`interpolate`],
+/// `f.determinant()`, [`StableNeoHookean::energy`], [`StableNeoHookean::pk1`]) in the same order,
+/// so the results are bitwise those of [`SolidModel::eval`]'s gradient (unit test
+/// `lane_kernel_is_bitwise_the_scalar_kernel`). Inlined into both copies of the dispatch.
+#[inline(always)]
+fn gradient_lanes_body(
+    elements: &[[u32; 10]],
+    element_lanes: &[ElementLanes],
+    mat: &StableNeoHookean,
+    x: &[Vector3<f64>],
+    grad: &mut [Vector3<f64>],
+    with_energy: bool,
+) -> KernelStats {
+    grad.iter_mut().for_each(|g| *g = Vector3::zeros());
+    let mut s = KernelStats::default();
+    let (mu, lambda, alpha) = (mat.mu, mat.lambda, mat.alpha);
+    for (el, l) in elements.iter().zip(element_lanes) {
+        let xe = gather(x, el);
+        // F at the four points: f[i][j][q] = sum_a x_a[i] g_a[j][q], in node order
+        let mut f = [[[0.0f64; NQ]; 3]; 3];
+        for (xa, ga) in xe.iter().zip(&l.g) {
+            for (i, row) in f.iter_mut().enumerate() {
+                for (j, v) in row.iter_mut().enumerate() {
+                    for q in 0..NQ {
+                        v[q] += xa[i] * ga[j][q];
+                    }
+                }
+            }
+        }
+        // determinant (nalgebra's 3x3 expansion) for the inverted count and the energy
+        let det = per_lane(|q| {
+            let m = |i: usize, j: usize| f[i][j][q];
+            let m12_23 = m(1, 1) * m(2, 2) - m(2, 1) * m(1, 2);
+            let m11_23 = m(1, 0) * m(2, 2) - m(2, 0) * m(1, 2);
+            let m11_22 = m(1, 0) * m(2, 1) - m(2, 0) * m(1, 1);
+            m(0, 0) * m12_23 - m(0, 1) * m11_23 + m(0, 2) * m11_22
+        });
+        // |F|^2, column by column
+        let ic = per_lane(|q| {
+            let col = |c: usize| {
+                f[0][c][q] * f[0][c][q] + f[1][c][q] * f[1][c][q] + f[2][c][q] * f[2][c][q]
+            };
+            0.0 + col(0) + col(1) + col(2)
+        });
+        for q in 0..NQ {
+            if det[q] <= 0.0 {
+                s.inverted += 1;
+            }
+            if with_energy {
+                let (j, a) = (det[q], alpha);
+                let psi = 0.5 * mu * (ic[q] - 3.0)
+                    + 0.5 * lambda * ((j - a) * (j - a) - (1.0 - a) * (1.0 - a))
+                    - 0.5 * mu * ((ic[q] + 1.0) / 4.0).ln();
+                s.energy += l.w[q] * psi;
+            }
+        }
+        // cofactor columns f1 x f2, f2 x f0, f0 x f1 (cof[r][c][q])
+        let mut cof = [[[0.0f64; NQ]; 3]; 3];
+        for (c, (u, v)) in [(1, 2), (2, 0), (0, 1)].into_iter().enumerate() {
+            for q in 0..NQ {
+                let (ax, ay, az) = (f[0][u][q], f[1][u][q], f[2][u][q]);
+                let (bx, by, bz) = (f[0][v][q], f[1][v][q], f[2][v][q]);
+                cof[0][c][q] = ay * bz - az * by;
+                cof[1][c][q] = az * bx - ax * bz;
+                cof[2][c][q] = ax * by - ay * bx;
+            }
+        }
+        // P = s F + c cof F, s = mu (1 - 1 / (|F|^2 + 1)), c = lambda (J - alpha) with J from
+        // the first column
+        let mut p = [[[0.0f64; NQ]; 3]; 3];
+        for q in 0..NQ {
+            let jq =
+                f[0][0][q] * cof[0][0][q] + f[1][0][q] * cof[1][0][q] + f[2][0][q] * cof[2][0][q];
+            let sq = mu * (1.0 - 1.0 / (ic[q] + 1.0));
+            let cq = lambda * (jq - alpha);
+            for r in 0..3 {
+                for c in 0..3 {
+                    p[r][c][q] = f[r][c][q] * sq + cof[r][c][q] * cq;
+                }
+            }
+        }
+        // node forces (P g_a) w, summed over the points in order (one lane per node)
+        let mut out = [[0.0f64; NODE_LANES]; 3];
+        for (q, gq) in l.gq.iter().enumerate() {
+            let w = l.w[q];
+            for (i, row) in out.iter_mut().enumerate() {
+                let (p0, p1, p2) = (p[i][0][q], p[i][1][q], p[i][2][q]);
+                for a in 0..NODE_LANES {
+                    row[a] += (p0 * gq[0][a] + p1 * gq[1][a] + p2 * gq[2][a]) * w;
+                }
+            }
+        }
+        for (a, &node) in el.iter().enumerate() {
+            grad[node as usize] += Vector3::new(out[0][a], out[1][a], out[2][a]);
+        }
+    }
+    s
+}
+
+modesuite_engine::avx2_dispatch! {
+    /// [`gradient_lanes_body`], with the AVX2 copy where `avx2`.
+    fn gradient_lanes / gradient_lanes_avx2 => gradient_lanes_body(
+        elements: &[[u32; 10]],
+        element_lanes: &[ElementLanes],
+        mat: &StableNeoHookean,
+        x: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        with_energy: bool,
+    ) -> KernelStats
+}
+
 impl SolidModel {
     /// Compiles a linear tet mesh (positively oriented) into 10-node elements.
     pub fn new(
@@ -114,6 +271,14 @@ impl SolidModel {
                 qp_weight.push(vol / NQ as f64);
             }
         }
+        let lanes = (0..ne)
+            .map(|e| {
+                ElementLanes::new(
+                    &qp_grad[e * NQ..e * NQ + NQ],
+                    &qp_weight[e * NQ..e * NQ + NQ],
+                )
+            })
+            .collect();
         let pattern = BlockPattern::from_cliques(n, mesh.elements.iter().map(|e| &e[..]));
         let mut elem_blocks = Vec::with_capacity(ne * 100);
         for el in &mesh.elements {
@@ -151,6 +316,7 @@ impl SolidModel {
             mass,
             qp_grad,
             qp_weight,
+            lanes,
             volume,
             pattern,
             elem_blocks,
@@ -384,6 +550,17 @@ impl SolidModel {
         damping: Option<(&[Vector3<f64>], f64)>,
         with_energy: bool,
     ) -> KernelStats {
+        if damping.is_none() {
+            return gradient_lanes(
+                modesuite_engine::simd::have_avx2(),
+                &self.mesh.elements,
+                &self.lanes,
+                &self.energy,
+                x,
+                grad,
+                with_energy,
+            );
+        }
         grad.iter_mut().for_each(|g| *g = Vector3::zeros());
         let mut s = KernelStats::default();
         for (e, el) in self.mesh.elements.iter().enumerate() {
@@ -422,6 +599,7 @@ impl SolidModel {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
     use crate::testing::box_mesh;
     use crate::{FemConfig, FemSolid, Material};
     use nalgebra::Vector3;
@@ -458,5 +636,101 @@ mod tests {
                 .zip(b.iter())
                 .all(|(u, v)| u.to_bits() == v.to_bits())));
         }
+    }
+
+    /// The scalar element kernel, one quadrature point at a time (the reference of the lanes).
+    fn scalar_kernel(m: &SolidModel, x: &[Vector3<f64>], grad: &mut [Vector3<f64>]) -> KernelStats {
+        grad.iter_mut().for_each(|g| *g = Vector3::zeros());
+        let mut s = KernelStats::default();
+        for (e, el) in m.mesh.elements.iter().enumerate() {
+            let xe = gather(x, el);
+            let mut ge = [Vector3::<f64>::zeros(); 10];
+            for q in 0..NQ {
+                let g = &m.qp_grad[e * NQ + q];
+                let w = m.qp_weight[e * NQ + q];
+                let f = interpolate(&xe, g);
+                if f.determinant() <= 0.0 {
+                    s.inverted += 1;
+                }
+                s.energy += w * m.energy.energy(&f);
+                let p = m.energy.pk1(&f);
+                for a in 0..10 {
+                    ge[a] += p * g[a] * w;
+                }
+            }
+            for a in 0..10 {
+                grad[el[a] as usize] += ge[a];
+            }
+        }
+        s
+    }
+
+    #[test]
+    fn lane_kernel_is_bitwise_the_scalar_kernel() {
+        let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.3, 0.05, 0.02), [6, 1, 2]);
+        let material = Material::new(3e5, 0.45, 1100.0).unwrap();
+        let s = FemSolid::new(&nodes, &tets, material, FemConfig::default()).unwrap();
+        let m = s.model();
+        let rest = s.rest_positions();
+        let bits = |g: &[Vector3<f64>]| {
+            g.iter()
+                .flat_map(|v| v.iter().map(|c| c.to_bits()))
+                .collect::<Vec<_>>()
+        };
+        let mut compared = 0;
+        for k in 0..50 {
+            // random-ish large deformations, some elements inverted
+            let mut x: Vec<Vector3<f64>> = rest
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    let t = ((i * 7 + k * 13) as f64 * 0.61).sin();
+                    let u = ((i * 3 + k * 5) as f64 * 1.37).cos();
+                    Vector3::new(
+                        p.x * (1.0 + 0.2 * u),
+                        p.y * (1.0 - 0.5 * t) + 0.01 * u,
+                        p.z + 0.3 * p.x * p.x * t,
+                    )
+                })
+                .collect();
+            if k % 3 == 0 {
+                x[k % rest.len()] = rest[(k + 5) % rest.len()];
+            }
+            let mut want = vec![Vector3::zeros(); x.len()];
+            let reference = scalar_kernel(m, &x, &mut want);
+            for avx2 in [false, modesuite_engine::simd::have_avx2()] {
+                let mut got = vec![Vector3::zeros(); x.len()];
+                let st = gradient_lanes(
+                    avx2,
+                    &m.mesh.elements,
+                    &m.lanes,
+                    &m.energy,
+                    &x,
+                    &mut got,
+                    true,
+                );
+                assert_eq!(
+                    st.energy.to_bits(),
+                    reference.energy.to_bits(),
+                    "energy, case {k}, avx2 {avx2}"
+                );
+                assert_eq!(st.inverted, reference.inverted);
+                assert_eq!(bits(&got), bits(&want), "gradient, case {k}, avx2 {avx2}");
+                let mut no_energy = vec![Vector3::zeros(); x.len()];
+                let st = gradient_lanes(
+                    avx2,
+                    &m.mesh.elements,
+                    &m.lanes,
+                    &m.energy,
+                    &x,
+                    &mut no_energy,
+                    false,
+                );
+                assert_eq!(st.inverted, reference.inverted);
+                assert_eq!(bits(&no_energy), bits(&want));
+                compared += 1;
+            }
+        }
+        println!("{compared} lane-kernel evaluations bitwise equal to the scalar kernel (AVX2 available: {})", modesuite_engine::simd::have_avx2());
     }
 }
