@@ -125,8 +125,8 @@ fn per_lane(f: impl Fn(usize) -> f64) -> Lanes {
     [f(0), f(1), f(2), f(3)]
 }
 
-/// Elastic gradient (and energy when `with_energy`) without damping, four quadrature points per
-/// pass; every lane performs the operations of the scalar kernel ([`interpolate`],
+/// Elastic gradient (when `grad` is given, written into it) and energy (when `with_energy`)
+/// without damping, four quadrature points per pass; every lane performs the operations of the scalar kernel ([`interpolate`],
 /// `f.determinant()`, [`StableNeoHookean::energy`], [`StableNeoHookean::pk1`]) in the same order,
 /// so the results are bitwise those of [`SolidModel::eval`]'s gradient (unit test
 /// `lane_kernel_is_bitwise_the_scalar_kernel`). Inlined into both copies of the dispatch.
@@ -136,10 +136,12 @@ fn gradient_lanes_body(
     element_lanes: &[ElementLanes],
     mat: &StableNeoHookean,
     x: &[Vector3<f64>],
-    grad: &mut [Vector3<f64>],
+    mut grad: Option<&mut [Vector3<f64>]>,
     with_energy: bool,
 ) -> KernelStats {
-    grad.iter_mut().for_each(|g| *g = Vector3::zeros());
+    if let Some(g) = grad.as_deref_mut() {
+        g.iter_mut().for_each(|g| *g = Vector3::zeros());
+    }
     let mut s = KernelStats::default();
     let (mu, lambda, alpha) = (mat.mu, mat.lambda, mat.alpha);
     for (el, l) in elements.iter().zip(element_lanes) {
@@ -182,6 +184,9 @@ fn gradient_lanes_body(
                 s.energy += l.w[q] * psi;
             }
         }
+        let Some(grad) = grad.as_deref_mut() else {
+            continue;
+        };
         // cofactor columns f1 x f2, f2 x f0, f0 x f1 (cof[r][c][q])
         let mut cof = [[[0.0f64; NQ]; 3]; 3];
         for (c, (u, v)) in [(1, 2), (2, 0), (0, 1)].into_iter().enumerate() {
@@ -232,7 +237,7 @@ modesuite_engine::avx2_dispatch! {
         element_lanes: &[ElementLanes],
         mat: &StableNeoHookean,
         x: &[Vector3<f64>],
-        grad: &mut [Vector3<f64>],
+        grad: Option<&mut [Vector3<f64>]>,
         with_energy: bool,
     ) -> KernelStats
 }
@@ -371,6 +376,17 @@ impl SolidModel {
         x: &[Vector3<f64>],
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> KernelStats {
+        if damping.is_none() {
+            return gradient_lanes(
+                modesuite_engine::simd::have_avx2(),
+                &self.mesh.elements,
+                &self.lanes,
+                &self.energy,
+                x,
+                None,
+                true,
+            );
+        }
         let mut s = KernelStats::default();
         for (e, el) in self.mesh.elements.iter().enumerate() {
             let xe = gather(x, el);
@@ -557,7 +573,7 @@ impl SolidModel {
                 &self.lanes,
                 &self.energy,
                 x,
-                grad,
+                Some(grad),
                 with_energy,
             );
         }
@@ -706,7 +722,7 @@ mod tests {
                     &m.lanes,
                     &m.energy,
                     &x,
-                    &mut got,
+                    Some(&mut got),
                     true,
                 );
                 assert_eq!(
@@ -723,9 +739,14 @@ mod tests {
                     &m.lanes,
                     &m.energy,
                     &x,
-                    &mut no_energy,
+                    Some(&mut no_energy),
                     false,
                 );
+                assert_eq!(st.inverted, reference.inverted);
+                assert_eq!(bits(&no_energy), bits(&want));
+                let st =
+                    gradient_lanes(avx2, &m.mesh.elements, &m.lanes, &m.energy, &x, None, true);
+                assert_eq!(st.energy.to_bits(), reference.energy.to_bits());
                 assert_eq!(st.inverted, reference.inverted);
                 assert_eq!(bits(&no_energy), bits(&want));
                 compared += 1;
