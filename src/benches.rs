@@ -235,8 +235,13 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
 
 /// Task cases, one per implemented environment id (the other ids are not implemented yet): the
 /// env with its state observation and the zero action, `ID` (1 env, 1 thread) and `ID_x16` (16
-/// envs stepped by a `VecEnv`, one thread and all threads). Extra keys: `task`, `overhead`
-/// (x16 on one thread: per-env time over the single env's, minus 1; 0.10 = 10 % slower per env).
+/// envs stepped by a `VecEnv`, one thread and all threads). Extra keys: `task`, `single_runs`
+/// (the single env's two runs, steps/s), `overhead` (x16 on one thread: per-env time over the
+/// single env's, minus 1; 0.10 = 10 % slower per env).
+///
+/// The single env runs the same window twice, before and after the one-thread x16 run, and its
+/// figure is the mean of the two times: a machine whose speed drifts within the run (a shared
+/// VM: 5-15 %) moves both sides of `overhead` alike instead of only one.
 pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
     for id in modesuite_tasks::IMPLEMENTED {
@@ -245,22 +250,24 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             e.reset(Some(0));
             Ok(e)
         };
-        let mut env = make()?;
-        let zero = vec![0.0f32; env.spaces().action.flat_dim()];
+        let flat_dim = make()?.spaces().action.flat_dim();
+        let zero = vec![0.0f32; flat_dim];
         // The same window of the episode for 1 and 16 envs, so `overhead` compares like with
         // like.
         let n = steps(300.0, opts);
-        let t = Instant::now();
-        for _ in 0..n {
-            if let Some(e) = env.step(&zero).info.error {
-                return Err(format!("{id}: {e}"));
+        let time_single = || -> Result<f64, String> {
+            let mut env = make()?;
+            let t = Instant::now();
+            for _ in 0..n {
+                if let Some(e) = env.step(&zero).info.error {
+                    return Err(format!("{id}: {e}"));
+                }
             }
-        }
-        let single = n as f64 / t.elapsed().as_secs_f64();
-        let mut extra = BTreeMap::new();
-        extra.insert("task".into(), json!(id));
-        out.push(BenchRecord::new(id, single, 1, 1, extra));
+            Ok(t.elapsed().as_secs_f64())
+        };
+        let before = time_single()?;
         let m = n;
+        let mut x16 = Vec::new();
         for threads in thread_counts(opts)? {
             let envs = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
             let mut venv =
@@ -270,7 +277,18 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             for _ in 0..m {
                 venv.step(&actions).map_err(|e| e.to_string())?;
             }
-            let sps = (16 * m) as f64 / t.elapsed().as_secs_f64();
+            x16.push((threads, (16 * m) as f64 / t.elapsed().as_secs_f64()));
+        }
+        let after = time_single()?;
+        let single = n as f64 / (0.5 * (before + after));
+        let mut extra = BTreeMap::new();
+        extra.insert("task".into(), json!(id));
+        extra.insert(
+            "single_runs".into(),
+            json!([n as f64 / before, n as f64 / after]),
+        );
+        out.push(BenchRecord::new(id, single, 1, 1, extra));
+        for (threads, sps) in x16 {
             let mut extra = BTreeMap::new();
             extra.insert("task".into(), json!(id));
             if threads == 1 {

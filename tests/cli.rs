@@ -264,5 +264,18 @@ fn bench_suites_json_have_their_keys() {
             }
             println!("{l}");
         }
+        if suite == "tasks" {
+            // the single env's two runs around the x16 runs, and the overhead against them
+            let single = lines
+                .iter()
+                .find(|l| l["case"] == "MoDe-Franka-Place-v0")
+                .unwrap();
+            let runs = single["single_runs"].as_array().expect("single_runs");
+            assert_eq!(runs.len(), 2);
+            assert!(runs.iter().all(|r| r.as_f64().is_some_and(|v| v > 0.0)));
+            assert!(lines.iter().any(|l| l["case"] == "MoDe-Franka-Place-v0_x16"
+                && l["threads"] == 1
+                && l["overhead"].as_f64().is_some()));
+        }
     }
 }
