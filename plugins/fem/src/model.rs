@@ -577,6 +577,18 @@ impl SolidModel {
                 with_energy,
             );
         }
+        self.gradient_scalar(x, grad, damping, with_energy)
+    }
+
+    /// [`SolidModel::eval_gradient`] one quadrature point at a time, with or without damping (the
+    /// kernel of the damped passes, and the reference the lane kernel is tested against).
+    fn gradient_scalar(
+        &self,
+        x: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        damping: Option<(&[Vector3<f64>], f64)>,
+        with_energy: bool,
+    ) -> KernelStats {
         grad.iter_mut().for_each(|g| *g = Vector3::zeros());
         let mut s = KernelStats::default();
         for (e, el) in self.mesh.elements.iter().enumerate() {
@@ -654,33 +666,6 @@ mod tests {
         }
     }
 
-    /// The scalar element kernel, one quadrature point at a time (the reference of the lanes).
-    fn scalar_kernel(m: &SolidModel, x: &[Vector3<f64>], grad: &mut [Vector3<f64>]) -> KernelStats {
-        grad.iter_mut().for_each(|g| *g = Vector3::zeros());
-        let mut s = KernelStats::default();
-        for (e, el) in m.mesh.elements.iter().enumerate() {
-            let xe = gather(x, el);
-            let mut ge = [Vector3::<f64>::zeros(); 10];
-            for q in 0..NQ {
-                let g = &m.qp_grad[e * NQ + q];
-                let w = m.qp_weight[e * NQ + q];
-                let f = interpolate(&xe, g);
-                if f.determinant() <= 0.0 {
-                    s.inverted += 1;
-                }
-                s.energy += w * m.energy.energy(&f);
-                let p = m.energy.pk1(&f);
-                for a in 0..10 {
-                    ge[a] += p * g[a] * w;
-                }
-            }
-            for a in 0..10 {
-                grad[el[a] as usize] += ge[a];
-            }
-        }
-        s
-    }
-
     #[test]
     fn lane_kernel_is_bitwise_the_scalar_kernel() {
         let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.3, 0.05, 0.02), [6, 1, 2]);
@@ -713,7 +698,7 @@ mod tests {
                 x[k % rest.len()] = rest[(k + 5) % rest.len()];
             }
             let mut want = vec![Vector3::zeros(); x.len()];
-            let reference = scalar_kernel(m, &x, &mut want);
+            let reference = m.gradient_scalar(&x, &mut want, None, true);
             for avx2 in [false, modesuite_engine::simd::have_avx2()] {
                 let mut got = vec![Vector3::zeros(); x.len()];
                 let st = gradient_lanes(
