@@ -239,7 +239,7 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
 /// (the single env's two runs, steps/s), `overhead` (x16 on one thread: per-env time over the
 /// single env's, minus 1; 0.10 = 10 % slower per env).
 ///
-/// The single env runs the same window twice, before and after the one-thread x16 run, and its
+/// The single env runs the same window twice, before and after the x16 runs, and its
 /// figure is the mean of the two times: a machine whose speed drifts within the run (a shared
 /// VM: 5-15 %) moves both sides of `overhead` alike instead of only one.
 pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
