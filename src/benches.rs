@@ -250,13 +250,12 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             e.reset(Some(0));
             Ok(e)
         };
-        let flat_dim = make()?.spaces().action.flat_dim();
-        let zero = vec![0.0f32; flat_dim];
+        let first = make()?;
+        let zero = vec![0.0f32; first.spaces().action.flat_dim()];
         // The same window of the episode for 1 and 16 envs, so `overhead` compares like with
         // like.
         let n = steps(300.0, opts);
-        let time_single = || -> Result<f64, String> {
-            let mut env = make()?;
+        let time_single = |mut env: modesuite_engine::Env| -> Result<f64, String> {
             let t = Instant::now();
             for _ in 0..n {
                 if let Some(e) = env.step(&zero).info.error {
@@ -265,7 +264,7 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             }
             Ok(t.elapsed().as_secs_f64())
         };
-        let before = time_single()?;
+        let before = time_single(first)?;
         let m = n;
         let mut x16 = Vec::new();
         for threads in thread_counts(opts)? {
@@ -279,7 +278,7 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             }
             x16.push((threads, (16 * m) as f64 / t.elapsed().as_secs_f64()));
         }
-        let after = time_single()?;
+        let after = time_single(make()?)?;
         let single = n as f64 / (0.5 * (before + after));
         let mut extra = BTreeMap::new();
         extra.insert("task".into(), json!(id));

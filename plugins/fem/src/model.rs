@@ -376,36 +376,7 @@ impl SolidModel {
         x: &[Vector3<f64>],
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> KernelStats {
-        if damping.is_none() {
-            return gradient_lanes(
-                modesuite_engine::simd::have_avx2(),
-                &self.mesh.elements,
-                &self.lanes,
-                &self.energy,
-                x,
-                None,
-                true,
-            );
-        }
-        let mut s = KernelStats::default();
-        for (e, el) in self.mesh.elements.iter().enumerate() {
-            let xe = gather(x, el);
-            let xpe = damping.map(|(xp, c)| (gather(xp, el), c));
-            for q in 0..NQ {
-                let g = &self.qp_grad[e * NQ + q];
-                let f = interpolate(&xe, g);
-                if f.determinant() <= 0.0 {
-                    s.inverted += 1;
-                }
-                let w = self.qp_weight[e * NQ + q];
-                s.energy += w * self.energy.energy(&f);
-                if let Some((xpe, c)) = &xpe {
-                    let fp = interpolate(xpe, g);
-                    s.energy += w * self.damping_qp(&f, &fp, *c, false).0;
-                }
-            }
-        }
-        s
+        self.kernel(x, None, damping, true)
     }
 
     /// Strain-rate (stiffness-proportional) damping potential density at one quadrature point:
@@ -459,7 +430,7 @@ impl SolidModel {
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> KernelStats {
         let Some(hess) = hess else {
-            return self.eval_gradient(x, grad, damping, true);
+            return self.kernel(x, Some(grad), damping, true);
         };
         grad.iter_mut().for_each(|g| *g = Vector3::zeros());
         hess.iter_mut().for_each(|b| *b = Matrix3::zeros());
@@ -544,7 +515,7 @@ impl SolidModel {
         grad: &mut [Vector3<f64>],
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> usize {
-        self.eval_gradient(x, grad, damping, false).inverted
+        self.kernel(x, Some(grad), damping, false).inverted
     }
 
     /// Elastic energy and gradient in one pass (N, written into `grad`): the energy is bitwise
@@ -555,14 +526,16 @@ impl SolidModel {
         grad: &mut [Vector3<f64>],
         damping: Option<(&[Vector3<f64>], f64)>,
     ) -> KernelStats {
-        self.eval_gradient(x, grad, damping, true)
+        self.kernel(x, Some(grad), damping, true)
     }
 
-    /// [`SolidModel::eval`] without the Hessian: gradient, and the energy when `with_energy`.
-    fn eval_gradient(
+    /// [`SolidModel::eval`] without the Hessian: the gradient when `grad` is given (written into
+    /// it), the energy when `with_energy`; the lane kernel without damping, else one quadrature
+    /// point at a time.
+    pub(crate) fn kernel(
         &self,
         x: &[Vector3<f64>],
-        grad: &mut [Vector3<f64>],
+        grad: Option<&mut [Vector3<f64>]>,
         damping: Option<(&[Vector3<f64>], f64)>,
         with_energy: bool,
     ) -> KernelStats {
@@ -573,23 +546,25 @@ impl SolidModel {
                 &self.lanes,
                 &self.energy,
                 x,
-                Some(grad),
+                grad,
                 with_energy,
             );
         }
-        self.gradient_scalar(x, grad, damping, with_energy)
+        self.kernel_scalar(x, grad, damping, with_energy)
     }
 
-    /// [`SolidModel::eval_gradient`] one quadrature point at a time, with or without damping (the
-    /// kernel of the damped passes, and the reference the lane kernel is tested against).
-    fn gradient_scalar(
+    /// [`SolidModel::kernel`] one quadrature point at a time, with or without damping (the kernel
+    /// of the damped passes, and the reference the lane kernel is tested against).
+    fn kernel_scalar(
         &self,
         x: &[Vector3<f64>],
-        grad: &mut [Vector3<f64>],
+        mut grad: Option<&mut [Vector3<f64>]>,
         damping: Option<(&[Vector3<f64>], f64)>,
         with_energy: bool,
     ) -> KernelStats {
-        grad.iter_mut().for_each(|g| *g = Vector3::zeros());
+        if let Some(g) = grad.as_deref_mut() {
+            g.iter_mut().for_each(|g| *g = Vector3::zeros());
+        }
         let mut s = KernelStats::default();
         for (e, el) in self.mesh.elements.iter().enumerate() {
             let xe = gather(x, el);
@@ -605,20 +580,26 @@ impl SolidModel {
                 if with_energy {
                     s.energy += w * self.energy.energy(&f);
                 }
-                let mut p = self.energy.pk1(&f);
-                if let Some((xpe, c)) = &xpe {
-                    let (ed, pd, _) = self.damping_qp(&f, &interpolate(xpe, g), *c, false);
-                    if with_energy {
-                        s.energy += w * ed;
-                    }
-                    p += pd;
+                let damped = xpe
+                    .as_ref()
+                    .map(|(xpe, c)| self.damping_qp(&f, &interpolate(xpe, g), *c, false));
+                if let (true, Some((ed, _, _))) = (with_energy, &damped) {
+                    s.energy += w * ed;
                 }
-                for a in 0..10 {
-                    ge[a] += p * g[a] * w;
+                if grad.is_some() {
+                    let mut p = self.energy.pk1(&f);
+                    if let Some((_, pd, _)) = damped {
+                        p += pd;
+                    }
+                    for a in 0..10 {
+                        ge[a] += p * g[a] * w;
+                    }
                 }
             }
-            for a in 0..10 {
-                grad[el[a] as usize] += ge[a];
+            if let Some(grad) = grad.as_deref_mut() {
+                for a in 0..10 {
+                    grad[el[a] as usize] += ge[a];
+                }
             }
         }
         s
@@ -632,11 +613,23 @@ mod tests {
     use crate::{FemConfig, FemSolid, Material};
     use nalgebra::Vector3;
 
+    /// A 0.3 x 0.05 x 0.02 m rubber belt on `cells`, Young's modulus `e`.
+    fn belt(cells: [usize; 3], e: f64) -> FemSolid {
+        let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.3, 0.05, 0.02), cells);
+        let material = Material::new(e, 0.45, 1100.0).unwrap();
+        FemSolid::new(&nodes, &tets, material, FemConfig::default()).unwrap()
+    }
+
+    /// The bits of every component, to compare vectors exactly.
+    fn bits(g: &[Vector3<f64>]) -> Vec<u64> {
+        g.iter()
+            .flat_map(|v| v.iter().map(|c| c.to_bits()))
+            .collect()
+    }
+
     #[test]
     fn energy_gradient_is_bitwise_energy_only_and_gradient() {
-        let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.3, 0.05, 0.02), [6, 1, 1]);
-        let material = Material::new(2e5, 0.45, 1100.0).unwrap();
-        let s = FemSolid::new(&nodes, &tets, material, FemConfig::default()).unwrap();
+        let s = belt([6, 1, 1], 2e5);
         let m = s.model();
         let rest = s.rest_positions();
         // bent and squeezed, one element inverted
@@ -659,25 +652,15 @@ mod tests {
             assert_eq!(fused.inverted, energy.inverted);
             assert_eq!(fused.inverted, inverted);
             assert!(inverted > 0, "the test shape has inverted points");
-            assert!(g1.iter().zip(&g2).all(|(a, b)| a
-                .iter()
-                .zip(b.iter())
-                .all(|(u, v)| u.to_bits() == v.to_bits())));
+            assert_eq!(bits(&g1), bits(&g2));
         }
     }
 
     #[test]
     fn lane_kernel_is_bitwise_the_scalar_kernel() {
-        let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.3, 0.05, 0.02), [6, 1, 2]);
-        let material = Material::new(3e5, 0.45, 1100.0).unwrap();
-        let s = FemSolid::new(&nodes, &tets, material, FemConfig::default()).unwrap();
+        let s = belt([6, 1, 2], 3e5);
         let m = s.model();
         let rest = s.rest_positions();
-        let bits = |g: &[Vector3<f64>]| {
-            g.iter()
-                .flat_map(|v| v.iter().map(|c| c.to_bits()))
-                .collect::<Vec<_>>()
-        };
         let mut compared = 0;
         for k in 0..50 {
             // random-ish large deformations, some elements inverted
@@ -698,18 +681,21 @@ mod tests {
                 x[k % rest.len()] = rest[(k + 5) % rest.len()];
             }
             let mut want = vec![Vector3::zeros(); x.len()];
-            let reference = m.gradient_scalar(&x, &mut want, None, true);
+            let reference = m.kernel_scalar(&x, Some(&mut want), None, true);
             for avx2 in [false, modesuite_engine::simd::have_avx2()] {
+                let run = |grad: Option<&mut [Vector3<f64>]>, with_energy: bool| {
+                    gradient_lanes(
+                        avx2,
+                        &m.mesh.elements,
+                        &m.lanes,
+                        &m.energy,
+                        &x,
+                        grad,
+                        with_energy,
+                    )
+                };
                 let mut got = vec![Vector3::zeros(); x.len()];
-                let st = gradient_lanes(
-                    avx2,
-                    &m.mesh.elements,
-                    &m.lanes,
-                    &m.energy,
-                    &x,
-                    Some(&mut got),
-                    true,
-                );
+                let st = run(Some(&mut got), true);
                 assert_eq!(
                     st.energy.to_bits(),
                     reference.energy.to_bits(),
@@ -718,22 +704,12 @@ mod tests {
                 assert_eq!(st.inverted, reference.inverted);
                 assert_eq!(bits(&got), bits(&want), "gradient, case {k}, avx2 {avx2}");
                 let mut no_energy = vec![Vector3::zeros(); x.len()];
-                let st = gradient_lanes(
-                    avx2,
-                    &m.mesh.elements,
-                    &m.lanes,
-                    &m.energy,
-                    &x,
-                    Some(&mut no_energy),
-                    false,
-                );
+                let st = run(Some(&mut no_energy), false);
                 assert_eq!(st.inverted, reference.inverted);
                 assert_eq!(bits(&no_energy), bits(&want));
-                let st =
-                    gradient_lanes(avx2, &m.mesh.elements, &m.lanes, &m.energy, &x, None, true);
+                let st = run(None, true);
                 assert_eq!(st.energy.to_bits(), reference.energy.to_bits());
                 assert_eq!(st.inverted, reference.inverted);
-                assert_eq!(bits(&no_energy), bits(&want));
                 compared += 1;
             }
         }

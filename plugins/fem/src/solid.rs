@@ -1851,14 +1851,7 @@ impl FemSolid {
         with_energy: bool,
     ) -> KernelStats {
         let damping = (p.c_kdamp > 0.0).then_some((&self.xprev[..], p.c_kdamp));
-        let stats = if with_energy {
-            self.model.energy_gradient(x, egrad, damping)
-        } else {
-            KernelStats {
-                energy: 0.0,
-                inverted: self.model.gradient(x, egrad, damping),
-            }
-        };
+        let stats = self.model.kernel(x, Some(egrad), damping, with_energy);
         let k = self.stiffness_scale;
         if k != 1.0 {
             egrad.iter_mut().for_each(|g| *g *= k);
