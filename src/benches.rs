@@ -233,15 +233,20 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     Ok(out)
 }
 
+/// Rounds of the interleaved 1-env / 16-env measurement of [`tasks_cases`].
+pub const TASK_ROUNDS: usize = 4;
+
 /// Task cases, one per implemented environment id (the other ids are not implemented yet): the
 /// env with its state observation and the zero action, `ID` (1 env, 1 thread) and `ID_x16` (16
 /// envs stepped by a `VecEnv`, one thread and all threads). Extra keys: `task`, `single_runs`
-/// (the single env's two runs, steps/s), `overhead` (x16 on one thread: per-env time over the
-/// single env's, minus 1; 0.10 = 10 % slower per env).
+/// (the single env's steps/s in each round), `overhead` (x16 on one thread: per-env time over the
+/// single env's, minus 1; 0.10 = 10 % slower per env) and `overhead_rounds` (the same per round).
 ///
-/// The single env runs the same window twice, before and after the x16 runs, and its
-/// figure is the mean of the two times: a machine whose speed drifts within the run (a shared
-/// VM: 5-15 %) moves both sides of `overhead` alike instead of only one.
+/// The single env and the 16 one-thread envs (all reset with the same seed) advance through the
+/// same window of the episode in [`TASK_ROUNDS`] alternating rounds: round `r` times the single
+/// env's steps `[r w, (r + 1) w)`, then the 16 envs' same steps. A shared VM's speed drifts
+/// 5-15 % within a minute; rounds a few seconds apart see nearly the same machine, so drift moves
+/// both sides of `overhead` alike. `steps_per_s` and `overhead` come from the summed times.
 pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
     for id in modesuite_tasks::IMPLEMENTED {
@@ -250,48 +255,61 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             e.reset(Some(0));
             Ok(e)
         };
-        let first = make()?;
-        let zero = vec![0.0f32; first.spaces().action.flat_dim()];
-        // The same window of the episode for 1 and 16 envs, so `overhead` compares like with
-        // like.
-        let n = steps(300.0, opts);
-        let time_single = |mut env: modesuite_engine::Env| -> Result<f64, String> {
+        let mut single = make()?;
+        let zero = vec![0.0f32; single.spaces().action.flat_dim()];
+        let actions = vec![0.0f32; 16 * zero.len()];
+        let x16_envs = |threads: usize| -> Result<modesuite_engine::VecEnv, String> {
+            let envs = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
+            modesuite_engine::VecEnv::new(envs, threads).map_err(|e| e.to_string())
+        };
+        let time_x16 = |venv: &mut modesuite_engine::VecEnv, w: usize| -> Result<f64, String> {
             let t = Instant::now();
-            for _ in 0..n {
-                if let Some(e) = env.step(&zero).info.error {
-                    return Err(format!("{id}: {e}"));
-                }
+            for _ in 0..w {
+                venv.step(&actions).map_err(|e| e.to_string())?;
             }
             Ok(t.elapsed().as_secs_f64())
         };
-        let before = time_single(first)?;
-        let m = n;
-        let mut x16 = Vec::new();
-        for threads in thread_counts(opts)? {
-            let envs = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
-            let mut venv =
-                modesuite_engine::VecEnv::new(envs, threads).map_err(|e| e.to_string())?;
-            let actions = vec![0.0f32; 16 * zero.len()];
+        let w = steps(300.0 / TASK_ROUNDS as f64, opts);
+        let n = w * TASK_ROUNDS;
+        let mut venv = x16_envs(1)?;
+        let mut rounds = Vec::with_capacity(TASK_ROUNDS);
+        for _ in 0..TASK_ROUNDS {
             let t = Instant::now();
-            for _ in 0..m {
-                venv.step(&actions).map_err(|e| e.to_string())?;
+            for _ in 0..w {
+                if let Some(e) = single.step(&zero).info.error {
+                    return Err(format!("{id}: {e}"));
+                }
             }
-            x16.push((threads, (16 * m) as f64 / t.elapsed().as_secs_f64()));
+            let t1 = t.elapsed().as_secs_f64();
+            rounds.push((t1, time_x16(&mut venv, w)?));
         }
-        let after = time_single(make()?)?;
-        let single = n as f64 / (0.5 * (before + after));
+        drop(venv);
+        let t1: f64 = rounds.iter().map(|r| r.0).sum();
+        let t16: f64 = rounds.iter().map(|r| r.1).sum();
+        let mut x16 = vec![(1, (16 * n) as f64 / t16, Some(t16 / (16.0 * t1) - 1.0))];
+        for threads in thread_counts(opts)?.into_iter().filter(|&t| t != 1) {
+            let mut venv = x16_envs(threads)?;
+            x16.push((threads, (16 * n) as f64 / time_x16(&mut venv, n)?, None));
+        }
         let mut extra = BTreeMap::new();
         extra.insert("task".into(), json!(id));
         extra.insert(
             "single_runs".into(),
-            json!([n as f64 / before, n as f64 / after]),
+            json!(rounds.iter().map(|r| w as f64 / r.0).collect::<Vec<_>>()),
         );
-        out.push(BenchRecord::new(id, single, 1, 1, extra));
-        for (threads, sps) in x16 {
+        out.push(BenchRecord::new(id, n as f64 / t1, 1, 1, extra));
+        for (threads, sps, overhead) in x16 {
             let mut extra = BTreeMap::new();
             extra.insert("task".into(), json!(id));
-            if threads == 1 {
-                extra.insert("overhead".into(), json!(single / sps - 1.0));
+            if let Some(o) = overhead {
+                extra.insert("overhead".into(), json!(o));
+                extra.insert(
+                    "overhead_rounds".into(),
+                    json!(rounds
+                        .iter()
+                        .map(|r| r.1 / (16.0 * r.0) - 1.0)
+                        .collect::<Vec<_>>()),
+                );
             }
             out.push(BenchRecord::new(
                 &format!("{id}_x16"),
