@@ -239,14 +239,15 @@ pub const TASK_ROUNDS: usize = 4;
 /// Task cases, one per implemented environment id (the other ids are not implemented yet): the
 /// env with its state observation and the zero action, `ID` (1 env, 1 thread) and `ID_x16` (16
 /// envs stepped by a `VecEnv`, one thread and all threads). Extra keys: `task`, `single_runs`
-/// (the single env's steps/s in each round), `overhead` (x16 on one thread: per-env time over the
+/// (the single-env rate in each round), `overhead` (x16 on one thread: per-env time over the
 /// single env's, minus 1; 0.10 = 10 % slower per env) and `overhead_rounds` (the same per round).
 ///
-/// The single env and the 16 one-thread envs (all reset with the same seed) advance through the
-/// same window of the episode in [`TASK_ROUNDS`] alternating rounds: round `r` times the single
-/// env's steps `[r w, (r + 1) w)`, then the 16 envs' same steps. A shared VM's speed drifts
-/// 5-15 % within a minute; rounds a few seconds apart see nearly the same machine, so drift moves
-/// both sides of `overhead` alike. `steps_per_s` and `overhead` come from the summed times.
+/// Both sides do the same work: 16 envs reset with the same seed, each stepped through the same
+/// window of the episode. The single-env side steps them one after another (each env alone for
+/// the window, as a single env runs), the x16 side in lock step through a one-thread `VecEnv`.
+/// The window is cut into [`TASK_ROUNDS`] rounds and the two sides take turns, so both see the
+/// same machine: a shared VM's speed drifts 5-15 % within a minute. `steps_per_s` and `overhead`
+/// come from the summed times.
 pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
     for id in modesuite_tasks::IMPLEMENTED {
@@ -255,8 +256,8 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             e.reset(Some(0));
             Ok(e)
         };
-        let mut single = make()?;
-        let zero = vec![0.0f32; single.spaces().action.flat_dim()];
+        let mut singles = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
+        let zero = vec![0.0f32; singles[0].spaces().action.flat_dim()];
         let actions = vec![0.0f32; 16 * zero.len()];
         let x16_envs = |threads: usize| -> Result<modesuite_engine::VecEnv, String> {
             let envs = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
@@ -269,24 +270,27 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             }
             Ok(t.elapsed().as_secs_f64())
         };
-        let w = steps(300.0 / TASK_ROUNDS as f64, opts);
+        // steps per round (at least one: `--scale 0.01`, the CLI test, runs 4 per env)
+        let w = ((300.0 * opts.scale / TASK_ROUNDS as f64) as usize).max(1);
         let n = w * TASK_ROUNDS;
         let mut venv = x16_envs(1)?;
         let mut rounds = Vec::with_capacity(TASK_ROUNDS);
         for _ in 0..TASK_ROUNDS {
             let t = Instant::now();
-            for _ in 0..w {
-                if let Some(e) = single.step(&zero).info.error {
-                    return Err(format!("{id}: {e}"));
+            for env in &mut singles {
+                for _ in 0..w {
+                    if let Some(e) = env.step(&zero).info.error {
+                        return Err(format!("{id}: {e}"));
+                    }
                 }
             }
             let t1 = t.elapsed().as_secs_f64();
             rounds.push((t1, time_x16(&mut venv, w)?));
         }
-        drop(venv);
+        drop((venv, singles));
         let t1: f64 = rounds.iter().map(|r| r.0).sum();
         let t16: f64 = rounds.iter().map(|r| r.1).sum();
-        let mut x16 = vec![(1, (16 * n) as f64 / t16, Some(t16 / (16.0 * t1) - 1.0))];
+        let mut x16 = vec![(1, (16 * n) as f64 / t16, Some(t16 / t1 - 1.0))];
         for threads in thread_counts(opts)?.into_iter().filter(|&t| t != 1) {
             let mut venv = x16_envs(threads)?;
             x16.push((threads, (16 * n) as f64 / time_x16(&mut venv, n)?, None));
@@ -295,9 +299,12 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         extra.insert("task".into(), json!(id));
         extra.insert(
             "single_runs".into(),
-            json!(rounds.iter().map(|r| w as f64 / r.0).collect::<Vec<_>>()),
+            json!(rounds
+                .iter()
+                .map(|r| (16 * w) as f64 / r.0)
+                .collect::<Vec<_>>()),
         );
-        out.push(BenchRecord::new(id, n as f64 / t1, 1, 1, extra));
+        out.push(BenchRecord::new(id, (16 * n) as f64 / t1, 1, 1, extra));
         for (threads, sps, overhead) in x16 {
             let mut extra = BTreeMap::new();
             extra.insert("task".into(), json!(id));
@@ -305,10 +312,7 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
                 extra.insert("overhead".into(), json!(o));
                 extra.insert(
                     "overhead_rounds".into(),
-                    json!(rounds
-                        .iter()
-                        .map(|r| r.1 / (16.0 * r.0) - 1.0)
-                        .collect::<Vec<_>>()),
+                    json!(rounds.iter().map(|r| r.1 / r.0 - 1.0).collect::<Vec<_>>()),
                 );
             }
             out.push(BenchRecord::new(
