@@ -184,21 +184,25 @@ fn robot_base(env: &modesuite_engine::Env) -> Result<nalgebra::Vector3<f64>, Str
 /// keys: `robot`, `mode`, `distance_m` (base travel during the run, to show it moved).
 pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
-    for (case, actions, mode) in [
+    // each robot's physics settings as its task scenes have them (Spot: 4 PGS sweeps for its
+    // feet's friction; the Franka's base has no ground contact)
+    for (case, actions, mode, pgs) in [
         (
             "franka",
             "(base: Velocity, arm: JointDelta)",
             "velocity+joint_delta",
+            1,
         ),
         (
             "spot",
             "(base: Locomotion, arm: JointDelta)",
             "locomotion+joint_delta",
+            4,
         ),
     ] {
         let text = format!(
             r#"Scene(
-    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1),
+    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1, rigid_pgs_iterations: {pgs}),
     objects: [(name: "ground", shape: Plane(size: (200.0, 200.0)), body: Static)],
     extensions: {{ "robots": [(name: "robot", model: "{case}", actions: {actions})] }},
 )"#

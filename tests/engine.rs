@@ -293,6 +293,11 @@ fn bad_input_is_reported_with_object_field_and_value() {
         "divisor of physics.substeps (4)",
     );
     expect_semantic(
+        "Scene(physics: (rigid_pgs_iterations: 0))",
+        "physics.rigid_pgs_iterations",
+        "1..=100",
+    );
+    expect_semantic(
         "Scene(physics: (substeps: 4, deformable_substeps: Some(0)))",
         "physics.deformable_substeps",
         "positive divisor",

@@ -247,29 +247,32 @@ fn robot_section_errors_name_the_field() {
 #[test]
 fn spot_leg_joint_mode_stands_with_zero_action() {
     let text = r#"Scene(
-    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1),
+    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1, rigid_pgs_iterations: 4),
     objects: [(name: "ground", shape: Plane(size: (20.0, 20.0)), body: Static)],
     extensions: { "robots": [(name: "spot", model: "spot", actions: (base: LegJoints))] },
 )"#;
     let mut e = env(text);
     let n = e.spaces().action.flat_dim();
     assert_eq!(n, 12 + 6 + 1);
+    let (_, b0, _) = ee_and_base(&e);
     for _ in 0..180 {
         let out = e.step(&vec![0.0; n]);
         assert!(out.info.error.is_none(), "{:?}", out.info.error);
     }
     let (_, b, _) = ee_and_base(&e);
+    let drift = (b - b0).xy().norm();
     println!(
-        "spot body height after 3 s: {:.4} m (tol 0.55 +- 0.03)",
+        "spot body height after 3 s: {:.4} m (tol 0.55 +- 0.03), xy drift {drift:.4} m (tol 0.05; 0.5 m with one PGS sweep)",
         b.z
     );
     assert!((b.z - 0.55).abs() <= 0.03);
+    assert!(drift <= 0.05);
 }
 
 #[test]
 fn spot_walks_through_the_locomotion_action() {
     let text = r#"Scene(
-    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1),
+    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1, rigid_pgs_iterations: 4),
     objects: [(name: "ground", shape: Plane(size: (40.0, 40.0)), body: Static)],
     extensions: { "robots": [(name: "spot", model: "spot")] },
 )"#;

@@ -117,6 +117,8 @@ pub struct SimSettings {
     pub gravity: nalgebra::Vector3<f64>,
     /// Internal solver substeps of each rapier step.
     pub rigid_iterations: u32,
+    /// Projected Gauss-Seidel sweeps per internal solver substep.
+    pub rigid_pgs_iterations: u32,
     /// Substeps per deformable step (1: every substep; the scene's `physics.substeps /
     /// physics.deformable_substeps`): deformable bodies step at the first substep of every
     /// `deformable_stride`, over that many substeps' time, before the rigid world's substep.
@@ -131,6 +133,7 @@ impl Default for SimSettings {
             decimation: 1,
             gravity: nalgebra::Vector3::new(0.0, 0.0, -9.81),
             rigid_iterations: 4,
+            rigid_pgs_iterations: 1,
             deformable_stride: 1,
         }
     }

@@ -133,6 +133,13 @@ pub struct PhysicsDesc {
     /// take `substeps` use 1.
     #[serde(default = "four")]
     pub rigid_iterations: u32,
+    /// Projected Gauss-Seidel sweeps per internal solver substep (rapier's
+    /// `num_internal_pgs_iterations`, default 1). Unlike `rigid_iterations` they reuse the
+    /// substep's multibody mass matrix, so they are the cheap way to converge friction: a
+    /// standing Spot whose joints are held creeps 0.5 m in 3 s with 1 sweep at 1/240 s, 1 cm
+    /// with 4 (robot tests, `spot_stands_on_its_legs`).
+    #[serde(default = "one")]
+    pub rigid_pgs_iterations: u32,
     /// Deformable steps per physics step (default: `substeps`). A divisor of `substeps`:
     /// deformable bodies (FEM, cloth) then step every `substeps / deformable_substeps` rigid
     /// substeps, over that much time, while the rigid world (robots) keeps its finer substeps.
@@ -152,6 +159,7 @@ impl Default for PhysicsDesc {
             decimation: 1,
             gravity: default_gravity(),
             rigid_iterations: 4,
+            rigid_pgs_iterations: 1,
             deformable_substeps: None,
         }
     }

@@ -307,6 +307,13 @@ fn validate_physics(p: &PhysicsDesc) -> Result<(), SceneError> {
             "an integer in 1..=100",
         ));
     }
+    if !(1..=100).contains(&p.rigid_pgs_iterations) {
+        return Err(SceneError::semantic(
+            "physics.rigid_pgs_iterations",
+            p.rigid_pgs_iterations.to_string(),
+            "an integer in 1..=100",
+        ));
+    }
     if !finite3(&p.gravity) {
         return Err(SceneError::semantic(
             "physics.gravity",
@@ -480,6 +487,7 @@ fn compile_inner(
         decimation: desc.physics.decimation,
         gravity: desc::gravity_of(&desc.physics),
         rigid_iterations: desc.physics.rigid_iterations,
+        rigid_pgs_iterations: desc.physics.rigid_pgs_iterations,
         deformable_stride: desc
             .physics
             .deformable_substeps
@@ -863,6 +871,7 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
     if let Some(mut rigid) = app.world.get_resource_mut::<crate::rigid::RigidContext>() {
         rigid.set_gravity(model.settings.gravity);
         rigid.params.num_solver_iterations = model.settings.rigid_iterations as usize;
+        rigid.params.num_internal_pgs_iterations = model.settings.rigid_pgs_iterations as usize;
     }
     for (i, obj) in model.objects.iter().enumerate() {
         let entity = app

@@ -47,7 +47,7 @@ fn euler(pose: &Isometry3<f64>) -> (f64, f64, f64) {
 impl Walker {
     fn new(params: TrotParams) -> Self {
         let (spec, model) = common::model(RobotKind::Spot);
-        let mut ctx = RigidContext::new();
+        let mut ctx = common::scene_context(RobotKind::Spot);
         let robot = spec
             .spawn(&mut ctx, &model, Isometry3::identity())
             .expect("spot spawns");

@@ -18,9 +18,22 @@ pub fn model(kind: RobotKind) -> (RobotSpec, UrdfModel) {
     (spec, model)
 }
 
+/// A rigid context with the rapier settings of the task scenes: one solver substep per step
+/// (`physics.rigid_iterations: 1`) and, for Spot, four Gauss-Seidel sweeps
+/// (`physics.rigid_pgs_iterations: 4`) for its feet's friction.
+pub fn scene_context(kind: RobotKind) -> RigidContext {
+    let mut ctx = RigidContext::new();
+    ctx.params.num_solver_iterations = 1;
+    ctx.params.num_internal_pgs_iterations = match kind {
+        RobotKind::Spot => 4,
+        RobotKind::Franka => 1,
+    };
+    ctx
+}
+
 pub fn spawn(kind: RobotKind) -> (RigidContext, RobotSpec, Robot) {
     let (spec, model) = model(kind);
-    let mut ctx = RigidContext::new();
+    let mut ctx = scene_context(kind);
     let robot = spec
         .spawn(&mut ctx, &model, Isometry3::identity())
         .expect("robot spawns");
