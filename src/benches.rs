@@ -184,22 +184,21 @@ fn robot_base(env: &modesuite_engine::Env) -> Result<nalgebra::Vector3<f64>, Str
 /// keys: `robot`, `mode`, `distance_m` (base travel during the run, to show it moved).
 pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
-    // each robot's physics settings as its task scenes have them (Spot: 4 PGS sweeps for its
-    // feet's friction; the Franka's base has no ground contact)
-    for (case, actions, mode, pgs) in [
+    for (kind, actions, mode) in [
         (
-            "franka",
+            modesuite_robots::RobotKind::Franka,
             "(base: Velocity, arm: JointDelta)",
             "velocity+joint_delta",
-            1,
         ),
         (
-            "spot",
+            modesuite_robots::RobotKind::Spot,
             "(base: Locomotion, arm: JointDelta)",
             "locomotion+joint_delta",
-            4,
         ),
     ] {
+        // the robot's Gauss-Seidel sweeps, as its scenes have them
+        let spec = modesuite_robots::RobotSpec::of(kind);
+        let (case, pgs) = (spec.id, spec.pgs_iterations);
         let text = format!(
             r#"Scene(
     physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1, rigid_pgs_iterations: {pgs}),

@@ -270,21 +270,21 @@ fn bench_suites_json_have_their_keys() {
                 .iter()
                 .find(|l| l["case"] == "MoDe-Franka-Place-v0")
                 .unwrap();
-            let positive = |v: &serde_json::Value, key: &str, n: usize| {
+            let numbers = |v: &serde_json::Value, key: &str, n: usize| {
                 let a = v[key].as_array().unwrap_or_else(|| panic!("{key} in {v}"));
                 assert_eq!(a.len(), n, "{key} in {v}");
                 a.iter()
                     .map(|r| r.as_f64().expect("a number"))
                     .collect::<Vec<_>>()
             };
-            let runs = positive(single, "single_runs", modesuite::benches::TASK_ROUNDS);
+            let runs = numbers(single, "single_runs", modesuite::benches::TASK_ROUNDS);
             assert!(runs.iter().all(|&v| v > 0.0));
             let x16 = lines
                 .iter()
                 .find(|l| l["case"] == "MoDe-Franka-Place-v0_x16" && l["threads"] == 1)
                 .expect("one-thread x16 case");
             assert!(x16["overhead"].as_f64().is_some_and(|o| o > -1.0));
-            let per_round = positive(x16, "overhead_rounds", modesuite::benches::TASK_ROUNDS);
+            let per_round = numbers(x16, "overhead_rounds", modesuite::benches::TASK_ROUNDS);
             assert!(per_round.iter().all(|&o| o > -1.0));
         }
     }

@@ -300,19 +300,17 @@ fn validate_physics(p: &PhysicsDesc) -> Result<(), SceneError> {
             ));
         }
     }
-    if !(1..=100).contains(&p.rigid_iterations) {
-        return Err(SceneError::semantic(
-            "physics.rigid_iterations",
-            p.rigid_iterations.to_string(),
-            "an integer in 1..=100",
-        ));
-    }
-    if !(1..=100).contains(&p.rigid_pgs_iterations) {
-        return Err(SceneError::semantic(
-            "physics.rigid_pgs_iterations",
-            p.rigid_pgs_iterations.to_string(),
-            "an integer in 1..=100",
-        ));
+    for (field, value) in [
+        ("physics.rigid_iterations", p.rigid_iterations),
+        ("physics.rigid_pgs_iterations", p.rigid_pgs_iterations),
+    ] {
+        if !(1..=100).contains(&value) {
+            return Err(SceneError::semantic(
+                field,
+                value.to_string(),
+                "an integer in 1..=100",
+            ));
+        }
     }
     if !finite3(&p.gravity) {
         return Err(SceneError::semantic(

@@ -50,6 +50,10 @@ pub struct RobotSpec {
     pub ee_frame: &'static str,
     /// Home pose: (joint, position) for every joint not at zero.
     pub home: &'static [(&'static str, f64)],
+    /// Gauss-Seidel sweeps per rapier substep its scenes use (`physics.rigid_pgs_iterations`):
+    /// 4 for Spot, whose feet slip with rapier's 1 (a Spot holding its joints crept 0.5 m in
+    /// 3 s); 1 for the Franka, whose base has no ground contact.
+    pub pgs_iterations: u32,
 }
 
 const FRANKA_ARM: &[&str] = &[
@@ -111,6 +115,7 @@ impl RobotSpec {
                     ("panda_finger_joint1", 0.04),
                     ("panda_finger_joint2", 0.04),
                 ],
+                pgs_iterations: 1,
             },
             RobotKind::Spot => Self {
                 kind,
@@ -138,6 +143,7 @@ impl RobotSpec {
                     ("arm_sh1", -3.0),
                     ("arm_el0", 3.0),
                 ],
+                pgs_iterations: 4,
             },
         }
     }

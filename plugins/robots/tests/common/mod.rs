@@ -18,16 +18,13 @@ pub fn model(kind: RobotKind) -> (RobotSpec, UrdfModel) {
     (spec, model)
 }
 
-/// A rigid context with the rapier settings of the task scenes: one solver substep per step
-/// (`physics.rigid_iterations: 1`) and, for Spot, four Gauss-Seidel sweeps
-/// (`physics.rigid_pgs_iterations: 4`) for its feet's friction.
+/// A rigid context with the rapier settings of the robot's scenes: one solver substep per step
+/// (`physics.rigid_iterations: 1`) and the robot's Gauss-Seidel sweeps
+/// (`RobotSpec::pgs_iterations`, `physics.rigid_pgs_iterations`).
 pub fn scene_context(kind: RobotKind) -> RigidContext {
     let mut ctx = RigidContext::new();
     ctx.params.num_solver_iterations = 1;
-    ctx.params.num_internal_pgs_iterations = match kind {
-        RobotKind::Spot => 4,
-        RobotKind::Franka => 1,
-    };
+    ctx.params.num_internal_pgs_iterations = RobotSpec::of(kind).pgs_iterations as usize;
     ctx
 }
 
