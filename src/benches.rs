@@ -178,10 +178,12 @@ fn robot_base(env: &modesuite_engine::Env) -> Result<nalgebra::Vector3<f64>, Str
     Ok(o.base.translation.vector)
 }
 
-/// Robot cases: each robot alone on flat ground at dt 1/60 s (4 substeps) with its controller
-/// on, through the full env path. `franka`: base velocity (0.25 m/s forward) and joint-delta arm
-/// mode with a constant arm command; `spot`: walking forward at 0.5 m/s (`Locomotion`). Extra
-/// keys: `robot`, `mode`, `distance_m` (base travel during the run, to show it moved).
+/// Robot cases: each robot alone on flat ground at dt 1/60 s with its controller on, through
+/// the full env path, with the rapier settings of its robot-only scenes (`RobotSpec::substeps`:
+/// Franka 1, Spot 4 substeps; `RobotSpec::pgs_iterations` Gauss-Seidel sweeps). `franka`: base
+/// velocity (0.25 m/s forward) and joint-delta arm mode with a constant arm command; `spot`:
+/// walking forward at 0.5 m/s (`Locomotion`). Extra keys: `robot`, `mode`, `distance_m` (base
+/// travel during the run, to show it moved), `substeps` (physics substeps per step).
 pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
     for (kind, actions, mode) in [
@@ -196,12 +198,12 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
             "locomotion+joint_delta",
         ),
     ] {
-        // the robot's Gauss-Seidel sweeps, as its scenes have them
+        // the robot's substeps and Gauss-Seidel sweeps, as its scenes have them
         let spec = modesuite_robots::RobotSpec::of(kind);
-        let (case, pgs) = (spec.id, spec.pgs_iterations);
+        let (case, sub, pgs) = (spec.id, spec.substeps, spec.pgs_iterations);
         let text = format!(
             r#"Scene(
-    physics: (dt: 0.016666666666666666, substeps: 4, rigid_iterations: 1, rigid_pgs_iterations: {pgs}),
+    physics: (dt: 0.016666666666666666, substeps: {sub}, rigid_iterations: 1, rigid_pgs_iterations: {pgs}),
     objects: [(name: "ground", shape: Plane(size: (200.0, 200.0)), body: Static)],
     extensions: {{ "robots": [(name: "robot", model: "{case}", actions: {actions})] }},
 )"#
@@ -231,6 +233,7 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         extra.insert("robot".into(), json!(case));
         extra.insert("mode".into(), json!(mode));
         extra.insert("distance_m".into(), json!((end - start).xy().norm()));
+        extra.insert("substeps".into(), json!(sub));
         out.push(BenchRecord::new(case, sps, 1, 1, extra));
     }
     Ok(out)

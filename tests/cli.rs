@@ -232,7 +232,7 @@ fn bench_suites_json_have_their_keys() {
         (
             "robots",
             &["franka", "spot"][..],
-            &["robot", "mode", "distance_m"][..],
+            &["robot", "mode", "distance_m", "substeps"][..],
         ),
         (
             "tasks",

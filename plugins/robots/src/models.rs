@@ -51,9 +51,17 @@ pub struct RobotSpec {
     /// Home pose: (joint, position) for every joint not at zero.
     pub home: &'static [(&'static str, f64)],
     /// Gauss-Seidel sweeps per rapier substep its scenes use (`physics.rigid_pgs_iterations`):
-    /// 4 for Spot, whose feet slip with rapier's 1 (a Spot holding its joints crept 0.5 m in
-    /// 3 s); 1 for the Franka, whose base has no ground contact.
+    /// 4 for both. Spot's feet slip with rapier's 1 (a Spot holding its joints crept 0.5 m in
+    /// 3 s); the Franka's seven arm motors, solved one after another, overshoot a 0.3 rad step
+    /// by 8.8 % at 1/240 s and 16.5 % at 1/120 s with 1 sweep, 2.5 % and 3.6 % with 4 (robot
+    /// tests, `franka_pd_tracking_with_gravity_compensation`).
     pub pgs_iterations: u32,
+    /// Physics substeps per 1/60 s step its controllers are validated at when it is alone
+    /// (`physics.substeps` of its robot-only scenes and of `modesuite bench robots`): 1 for the
+    /// Franka (the robot tests pass at 1/60 s), 4 for Spot (its trot needs 1/240 s: at 1/120 s
+    /// it walks 0.30 m/s for 0.5 and falls). Scenes with deformables may take more (the Franka's
+    /// task scenes take 2 or 4, for the FEM or the cloth).
+    pub substeps: u32,
 }
 
 const FRANKA_ARM: &[&str] = &[
@@ -115,7 +123,8 @@ impl RobotSpec {
                     ("panda_finger_joint1", 0.04),
                     ("panda_finger_joint2", 0.04),
                 ],
-                pgs_iterations: 1,
+                pgs_iterations: 4,
+                substeps: 1,
             },
             RobotKind::Spot => Self {
                 kind,
@@ -144,6 +153,7 @@ impl RobotSpec {
                     ("arm_el0", 3.0),
                 ],
                 pgs_iterations: 4,
+                substeps: 4,
             },
         }
     }

@@ -3,7 +3,6 @@
 
 mod common;
 
-use common::DT;
 use modesuite_engine::deps::nalgebra::{Isometry3, Vector3};
 use modesuite_engine::deps::rapier3d::prelude::{ColliderBuilder, RigidBodyBuilder};
 use modesuite_engine::math::vec_to_rapier;
@@ -12,6 +11,7 @@ use modesuite_robots::{BaseVelocity, HolonomicBase, JointController, RobotKind};
 /// Steps the Franka arm from home to home + `delta` on every arm joint and returns, per joint,
 /// (error at 1 s, overshoot fraction, settling time into 0.01 rad in s).
 fn franka_step_response(
+    dt: f64,
     gravity_compensation: bool,
     delta: f64,
     substeps_per_apply: usize,
@@ -21,9 +21,9 @@ fn franka_step_response(
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
     ctl.gravity_compensation = gravity_compensation;
     // Settle for 0.5 s at home.
-    for _ in 0..120 {
+    for _ in 0..(0.5 / dt).round() as usize {
         ctl.apply(&robot, &mut ctx).unwrap();
-        ctx.step(DT).unwrap();
+        ctx.step(dt).unwrap();
     }
     let q0 = robot.joint_positions(&ctx).unwrap();
     let mut target = Vec::new();
@@ -40,18 +40,18 @@ fn franka_step_response(
     }
     let mut peak = vec![0.0f64; arm.len()];
     let mut settle = vec![0.0f64; arm.len()];
-    let steps = (1.0 / DT).round() as usize;
+    let steps = (1.0 / dt).round() as usize;
     for s in 0..steps {
         if s % substeps_per_apply == 0 {
             ctl.apply(&robot, &mut ctx).unwrap();
         }
-        ctx.step(DT).unwrap();
+        ctx.step(dt).unwrap();
         let q = robot.joint_positions(&ctx).unwrap();
         for (k, &i) in arm.iter().enumerate() {
             let dir = (target[k] - q0[i]).signum();
             peak[k] = peak[k].max((q[i] - target[k]) * dir);
             if (q[i] - target[k]).abs() > 0.01 {
-                settle[k] = (s + 1) as f64 * DT;
+                settle[k] = (s + 1) as f64 * dt;
             }
         }
     }
@@ -69,22 +69,22 @@ fn franka_step_response(
         .collect()
 }
 
+/// Worst (error, overshoot, settling time) over the arm's joints.
+fn worst(rows: &[(String, f64, f64, f64)]) -> (f64, f64, f64) {
+    rows.iter().fold((0.0, 0.0, 0.0), |w, r| {
+        (w.0.max(r.1), w.1.max(r.2), w.2.max(r.3))
+    })
+}
+
 #[test]
 fn franka_pd_tracking_with_gravity_compensation() {
     let delta = 0.3;
-    let with = franka_step_response(true, delta, 1);
-    let without = franka_step_response(false, delta, 1);
-    // The controller applied once per 60 Hz control step (4 substeps) instead of every substep.
-    let at_60hz = franka_step_response(true, delta, 4);
-    let e60 = at_60hz.iter().map(|r| r.1).fold(0.0, f64::max);
-    let o60 = at_60hz.iter().map(|r| r.2).fold(0.0, f64::max);
-    let t60 = at_60hz.iter().map(|r| r.3).fold(0.0, f64::max);
+    let dt = common::dt(RobotKind::Franka);
+    let with = franka_step_response(dt, true, delta, 1);
+    let without = franka_step_response(dt, false, delta, 1);
     println!(
-        "controller at 60 Hz (every 4th substep): worst error {e60:.5} rad, overshoot {:.2} %, settling {t60:.3} s",
-        o60 * 100.0
+        "step of {delta} rad on every arm joint at dt {dt:.5} s, measured 1 s after the step:"
     );
-    assert!(e60 <= 0.01 && o60 <= 0.10 && t60 < 1.0);
-    println!("step of {delta} rad on every arm joint, measured 1 s after the step:");
     println!("joint          | error (tol 0.01 rad) | overshoot (tol 10 %) | settled to 0.01 rad after (tol 1 s) | error without gravity comp.");
     for ((name, e, o, ts), (_, e0, _, _)) in with.iter().zip(&without) {
         println!(
@@ -92,20 +92,35 @@ fn franka_pd_tracking_with_gravity_compensation() {
             o * 100.0
         );
     }
-    let worst_e = with.iter().map(|r| r.1).fold(0.0, f64::max);
-    let worst_o = with.iter().map(|r| r.2).fold(0.0, f64::max);
-    let worst_t = with.iter().map(|r| r.3).fold(0.0, f64::max);
-    println!(
-        "worst: error {worst_e:.5} rad, overshoot {:.2} %, settling {worst_t:.3} s",
-        worst_o * 100.0
-    );
-    assert!(worst_t < 1.0, "not settled within 1 s");
-    assert!(worst_e <= 0.01, "steady-state error {worst_e} rad > 0.01");
-    assert!(worst_o <= 0.10, "overshoot {worst_o} > 10 %");
+    // The same step at the finer substeps of the Franka's task scenes (1/120 s with FEM rods
+    // and cloth, 1/240 s in Lift), and with the controller applied once per 60 Hz control step
+    // (every 4th substep of 1/240 s) instead of every substep.
+    let mut cases = vec![("controller every substep", dt, with)];
+    for (label, h, per) in [
+        ("controller every substep", 1.0 / 120.0, 1),
+        ("controller every substep", 1.0 / 240.0, 1),
+        ("controller every 4th substep", 1.0 / 240.0, 4),
+    ] {
+        cases.push((label, h, franka_step_response(h, true, delta, per)));
+    }
+    for (label, h, rows) in &cases {
+        let (e, o, t) = worst(rows);
+        println!(
+            "dt {h:.5} s, {label}: worst error {e:.5} rad (tol 0.01), overshoot {:.2} % (tol 10 %), settling {t:.3} s (tol 1 s)",
+            o * 100.0
+        );
+        assert!(t < 1.0, "dt {h}, {label}: not settled within 1 s");
+        assert!(
+            e <= 0.01,
+            "dt {h}, {label}: steady-state error {e} rad > 0.01"
+        );
+        assert!(o <= 0.10, "dt {h}, {label}: overshoot {o} > 10 %");
+    }
 }
 
 #[test]
 fn franka_holonomic_base_tracks_velocity() {
+    let dt = common::dt(RobotKind::Franka);
     let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
     let [x, y, yaw] = spec.base_joints.unwrap();
     let base = HolonomicBase::new(&robot, x, y, yaw).unwrap();
@@ -136,11 +151,11 @@ fn franka_holonomic_base_tracks_velocity() {
     for cmd in cmds {
         // 1 s to accelerate, then the mean over 1 s.
         let mut sum = [0.0; 3];
-        let n = (1.0 / DT).round() as usize;
+        let n = (1.0 / dt).round() as usize;
         for k in 0..2 * n {
             base.command(&robot, &ctx, &mut ctl, cmd).unwrap();
             ctl.apply(&robot, &mut ctx).unwrap();
-            ctx.step(DT).unwrap();
+            ctx.step(dt).unwrap();
             if k >= n {
                 let m = base.measured(&robot, &ctx).unwrap();
                 sum[0] += m.vx;
@@ -176,6 +191,7 @@ fn franka_holonomic_base_tracks_velocity() {
 
 #[test]
 fn spot_stands_on_its_legs() {
+    let dt = common::dt(RobotKind::Spot);
     let (mut ctx, spec, robot) = common::spawn(RobotKind::Spot);
     // Floor: a fixed box whose top is z = 0.
     let floor = ctx.bodies.insert(
@@ -191,10 +207,10 @@ fn spot_stands_on_its_legs() {
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
     ctl.gains = spec.default_gains(&robot);
     let z0 = robot.body_pose(&ctx, 0).unwrap().translation.z;
-    let steps = (3.0 / DT).round() as usize;
+    let steps = (3.0 / dt).round() as usize;
     for _ in 0..steps {
         ctl.apply(&robot, &mut ctx).unwrap();
-        ctx.step(DT).unwrap();
+        ctx.step(dt).unwrap();
     }
     let pose: Isometry3<f64> = robot.body_pose(&ctx, 0).unwrap();
     let (roll, pitch, _) = pose.rotation.euler_angles();
@@ -210,6 +226,7 @@ fn spot_stands_on_its_legs() {
 
 #[test]
 fn franka_gripper_mimic_fingers_close_together() {
+    let dt = common::dt(RobotKind::Franka);
     let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
     let f1 = robot.joint_index(spec.gripper_joints[0]).unwrap();
     let f2 = robot.joint_index(spec.gripper_joints[1]).unwrap();
@@ -218,9 +235,9 @@ fn franka_gripper_mimic_fingers_close_together() {
     ctl.set_position(&robot, f1, spec.gripper_open_closed.1)
         .unwrap();
     let mut worst_gap = 0.0f64;
-    for _ in 0..(0.5 / DT).round() as usize {
+    for _ in 0..(0.5 / dt).round() as usize {
         ctl.apply(&robot, &mut ctx).unwrap();
-        ctx.step(DT).unwrap();
+        ctx.step(dt).unwrap();
         let q = robot.joint_positions(&ctx).unwrap();
         worst_gap = worst_gap.max((q[f1] - q[f2]).abs());
     }

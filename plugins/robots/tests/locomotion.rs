@@ -5,7 +5,6 @@
 
 mod common;
 
-use common::DT;
 use modesuite_engine::deps::nalgebra::{Isometry3, Vector3};
 use modesuite_engine::deps::rapier3d::prelude::{ColliderBuilder, RigidBodyBuilder};
 use modesuite_engine::math::vec_to_rapier;
@@ -15,9 +14,10 @@ use modesuite_robots::{
     BaseVelocity, JointController, Robot, RobotKind, RobotSpec, TrotController, TrotParams,
 };
 
-/// Control period: 60 Hz, 4 substeps of [`DT`].
-const CONTROL_DT: f64 = 4.0 * DT;
+/// Control period: 60 Hz, in Spot's 4 substeps (`RobotSpec::substeps`) of [`DT`].
+const CONTROL_DT: f64 = 1.0 / 60.0;
 const SUBSTEPS: usize = 4;
+const DT: f64 = CONTROL_DT / SUBSTEPS as f64;
 
 /// Spot on a flat floor (a fixed box with friction 0.8 whose top is z = 0), with a joint
 /// controller holding the home pose and a trot controller.
@@ -47,6 +47,7 @@ fn euler(pose: &Isometry3<f64>) -> (f64, f64, f64) {
 impl Walker {
     fn new(params: TrotParams) -> Self {
         let (spec, model) = common::model(RobotKind::Spot);
+        assert_eq!(spec.substeps as usize, SUBSTEPS, "Spot's substeps");
         let mut ctx = common::scene_context(RobotKind::Spot);
         let robot = spec
             .spawn(&mut ctx, &model, Isometry3::identity())

@@ -5,8 +5,11 @@ use modesuite_engine::deps::nalgebra::Isometry3;
 use modesuite_engine::RigidContext;
 use modesuite_robots::{AssetPaths, Robot, RobotKind, RobotSpec, UrdfModel};
 
-/// Physics substep used by the tests (the engine's default: 60 Hz control, 4 substeps).
-pub const DT: f64 = 1.0 / 240.0;
+/// Physics substep of a robot alone: 1/60 s split into its `RobotSpec::substeps` (Franka 1/60 s,
+/// Spot 1/240 s), as its robot-only scenes and `modesuite bench robots` run it.
+pub fn dt(kind: RobotKind) -> f64 {
+    1.0 / (60.0 * f64::from(RobotSpec::of(kind).substeps))
+}
 
 pub fn assets() -> AssetPaths {
     AssetPaths::workspace_default()
