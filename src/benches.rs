@@ -180,7 +180,7 @@ fn robot_base(env: &modesuite_engine::Env) -> Result<nalgebra::Vector3<f64>, Str
 
 /// Robot cases: each robot alone on flat ground at dt 1/60 s with its controller on, through
 /// the full env path, with the rapier settings of its robot-only scenes (`RobotSpec::substeps`:
-/// Franka 1, Spot 4 substeps; `RobotSpec::pgs_iterations` Gauss-Seidel sweeps). `franka`: base
+/// Franka 1, Spot 2 substeps; `RobotSpec::pgs_iterations` Gauss-Seidel sweeps). `franka`: base
 /// velocity (0.25 m/s forward) and joint-delta arm mode with a constant arm command; `spot`:
 /// walking forward at 0.5 m/s (`Locomotion`). Extra keys: `robot`, `mode`, `distance_m` (base
 /// travel during the run, to show it moved), `substeps` (physics substeps per step).

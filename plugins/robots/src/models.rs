@@ -50,17 +50,20 @@ pub struct RobotSpec {
     pub ee_frame: &'static str,
     /// Home pose: (joint, position) for every joint not at zero.
     pub home: &'static [(&'static str, f64)],
-    /// Gauss-Seidel sweeps per rapier substep its scenes use (`physics.rigid_pgs_iterations`):
-    /// 4 for both. Spot's feet slip with rapier's 1 (a Spot holding its joints crept 0.5 m in
-    /// 3 s); the Franka's seven arm motors, solved one after another, overshoot a 0.3 rad step
-    /// by 8.8 % at 1/240 s and 16.5 % at 1/120 s with 1 sweep, 2.5 % and 3.6 % with 4 (robot
-    /// tests, `franka_pd_tracking_with_gravity_compensation`).
+    /// Gauss-Seidel sweeps per rapier substep of its robot-only scenes
+    /// (`physics.rigid_pgs_iterations`; rapier's default is 1): 4 for the Franka, whose seven
+    /// arm motors, solved one after another, overshoot a 0.3 rad step by 8.8 % at 1/240 s and
+    /// 16.5 % at 1/120 s with 1 sweep, 2.5 % and 3.6 % with 4 (robot tests,
+    /// `franka_pd_tracking_with_gravity_compensation`); 8 for Spot at 1/120 s, where 4 leave the
+    /// stance feet slipping (the trot walked 0.30 m/s for 0.5; a Spot holding its joints with 1
+    /// sweep crept 0.5 m in 3 s at 1/240 s).
     pub pgs_iterations: u32,
     /// Physics substeps per 1/60 s step its controllers are validated at when it is alone
     /// (`physics.substeps` of its robot-only scenes and of `modesuite bench robots`): 1 for the
-    /// Franka (the robot tests pass at 1/60 s), 4 for Spot (its trot needs 1/240 s: at 1/120 s
-    /// it walks 0.30 m/s for 0.5 and falls). Scenes with deformables may take more (the Franka's
-    /// task scenes take 2 or 4, for the FEM or the cloth).
+    /// Franka (the robot tests pass at 1/60 s), 2 for Spot (at 1/60 s its trot covered 1.0 m of
+    /// the 4.2 m `bench robots` walks in 10 s).
+    /// Scenes with deformables may take more (4 where the FEM steps at 1/240 s; Spot then
+    /// walks with 4 sweeps, also validated).
     pub substeps: u32,
 }
 
@@ -152,8 +155,8 @@ impl RobotSpec {
                     ("arm_sh1", -3.0),
                     ("arm_el0", 3.0),
                 ],
-                pgs_iterations: 4,
-                substeps: 4,
+                pgs_iterations: 8,
+                substeps: 2,
             },
         }
     }

@@ -14,10 +14,49 @@ use modesuite_robots::{
     BaseVelocity, JointController, Robot, RobotKind, RobotSpec, TrotController, TrotParams,
 };
 
-/// Control period: 60 Hz, in Spot's 4 substeps (`RobotSpec::substeps`) of [`DT`].
+/// Control period: 60 Hz.
 const CONTROL_DT: f64 = 1.0 / 60.0;
-const SUBSTEPS: usize = 4;
-const DT: f64 = CONTROL_DT / SUBSTEPS as f64;
+
+/// Rapier settings a walking Spot runs with: substeps per 1/60 s step and Gauss-Seidel sweeps
+/// per substep (`physics.substeps`, `physics.rigid_pgs_iterations`).
+#[derive(Debug, Clone, Copy)]
+struct Rapier {
+    substeps: usize,
+    pgs: usize,
+}
+
+impl Rapier {
+    /// Spot alone (`RobotSpec::substeps`, `RobotSpec::pgs_iterations`): robot-only scenes and
+    /// the tasks whose deformables step at 1/120 s.
+    fn alone() -> Self {
+        let spec = RobotSpec::of(RobotKind::Spot);
+        Self {
+            substeps: spec.substeps as usize,
+            pgs: spec.pgs_iterations as usize,
+        }
+    }
+
+    /// The task scenes whose FEM steps at 1/240 s (Spot Transport, Drag, Lift).
+    const FINE: Self = Self {
+        substeps: 4,
+        pgs: 4,
+    };
+
+    /// Both, for the validation rows.
+    fn both() -> [Self; 2] {
+        [Self::alone(), Self::FINE]
+    }
+
+    fn dt(&self) -> f64 {
+        CONTROL_DT / self.substeps as f64
+    }
+}
+
+impl std::fmt::Display for Rapier {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "[{} substeps, {} sweeps]", self.substeps, self.pgs)
+    }
+}
 
 /// Spot on a flat floor (a fixed box with friction 0.8 whose top is z = 0), with a joint
 /// controller holding the home pose and a trot controller.
@@ -27,6 +66,7 @@ struct Walker {
     robot: Robot,
     ctl: JointController,
     trot: TrotController,
+    rapier: Rapier,
     /// Control steps done.
     steps: usize,
 }
@@ -45,10 +85,10 @@ fn euler(pose: &Isometry3<f64>) -> (f64, f64, f64) {
 }
 
 impl Walker {
-    fn new(params: TrotParams) -> Self {
+    fn new(params: TrotParams, rapier: Rapier) -> Self {
         let (spec, model) = common::model(RobotKind::Spot);
-        assert_eq!(spec.substeps as usize, SUBSTEPS, "Spot's substeps");
         let mut ctx = common::scene_context(RobotKind::Spot);
+        ctx.params.num_internal_pgs_iterations = rapier.pgs;
         let robot = spec
             .spawn(&mut ctx, &model, Isometry3::identity())
             .expect("spot spawns");
@@ -71,6 +111,7 @@ impl Walker {
             robot,
             ctl,
             trot,
+            rapier,
             steps: 0,
         }
     }
@@ -86,23 +127,25 @@ impl Walker {
         }
     }
 
-    /// One control step: the trot controller, then 4 substeps of joint control and physics.
-    /// `each_substep` runs after the joint controller (which clears the robot's forces) and
-    /// before the physics step, to add external forces; `worst` tracks the lowest body height
-    /// and the largest |roll| and |pitch| over the substeps.
+    /// One control step: substeps of the trot controller, joint control and physics, as the
+    /// engine runs them (`robot_control` every substep). `each_substep` runs after the joint
+    /// controller (which clears the robot's forces) and before the physics step, to add
+    /// external forces; `worst` tracks the lowest body height and the largest |roll| and
+    /// |pitch| over the substeps.
     fn control_step(
         &mut self,
         cmd: BaseVelocity,
         mut each_substep: impl FnMut(&Robot, &mut RigidContext),
         worst: &mut Worst,
     ) {
-        self.trot
-            .step(&self.robot, &self.ctx, cmd, CONTROL_DT, &mut self.ctl)
-            .unwrap();
-        for _ in 0..SUBSTEPS {
+        let dt = self.rapier.dt();
+        for _ in 0..self.rapier.substeps {
+            self.trot
+                .step(&self.robot, &self.ctx, cmd, dt, &mut self.ctl)
+                .unwrap();
             self.ctl.apply(&self.robot, &mut self.ctx).unwrap();
             each_substep(&self.robot, &mut self.ctx);
-            self.ctx.step(DT).unwrap();
+            self.ctx.step(dt).unwrap();
             worst.add(&self.base());
         }
         self.steps += 1;
@@ -158,8 +201,13 @@ fn unwrap_angle(prev: f64, now: f64) -> f64 {
 /// `window` seconds. Returns the mean velocity over the window in the frame of the heading at
 /// the window's start (forward, left, yaw rate), the xy displacement over the window, and the
 /// extremes of the base state over the window.
-fn walk_constant(cmd: BaseVelocity, ramp: f64, window: f64) -> ([f64; 3], f64, Worst) {
-    let mut w = Walker::new(TrotParams::default());
+fn walk_constant(
+    rapier: Rapier,
+    cmd: BaseVelocity,
+    ramp: f64,
+    window: f64,
+) -> ([f64; 3], f64, Worst) {
+    let mut w = Walker::new(TrotParams::default(), rapier);
     let mut worst_ramp = Worst::new();
     w.run(cmd, ramp, &mut worst_ramp);
     let start = w.base();
@@ -263,23 +311,25 @@ fn spot_walks_forward_at_half_a_metre_per_second() {
         vy: 0.0,
         wz: 0.0,
     };
-    let (v, _, worst) = walk_constant(cmd, 2.0, 4.0);
-    let err = (v[0] - 0.5).abs() / 0.5;
-    println!(
-        "command vx 0.5 m/s; mean over 4 s after a 2 s ramp: forward {:.4} m/s (error {:.1} %, tol 20 %), lateral {:+.4} m/s (tol 0.1), yaw rate {:+.4} rad/s (tol 0.1)",
-        v[0],
-        err * 100.0,
-        v[1],
-        v[2]
-    );
-    println!(
-        "body height {:.4}..{:.4} m (tol 0.45..0.65), max |roll| {:.4}, max |pitch| {:.4} rad (tol 0.15)",
-        worst.min_z, worst.max_z, worst.max_roll, worst.max_pitch
-    );
-    assert!(err <= 0.2, "forward speed {} m/s", v[0]);
-    assert!(v[1].abs() <= 0.1 && v[2].abs() <= 0.1);
-    assert!(worst.min_z >= 0.45 && worst.max_z <= 0.65);
-    assert!(worst.max_roll <= 0.15 && worst.max_pitch <= 0.15);
+    for rapier in Rapier::both() {
+        let (v, _, worst) = walk_constant(rapier, cmd, 2.0, 4.0);
+        let err = (v[0] - 0.5).abs() / 0.5;
+        println!(
+            "{rapier} command vx 0.5 m/s; mean over 4 s after a 2 s ramp: forward {:.4} m/s (error {:.1} %, tol 20 %), lateral {:+.4} m/s (tol 0.1), yaw rate {:+.4} rad/s (tol 0.1)",
+            v[0],
+            err * 100.0,
+            v[1],
+            v[2]
+        );
+        println!(
+            "{rapier} body height {:.4}..{:.4} m (tol 0.45..0.65), max |roll| {:.4}, max |pitch| {:.4} rad (tol 0.15)",
+            worst.min_z, worst.max_z, worst.max_roll, worst.max_pitch
+        );
+        assert!(err <= 0.2, "{rapier} forward speed {} m/s", v[0]);
+        assert!(v[1].abs() <= 0.1 && v[2].abs() <= 0.1);
+        assert!(worst.min_z >= 0.45 && worst.max_z <= 0.65);
+        assert!(worst.max_roll <= 0.15 && worst.max_pitch <= 0.15);
+    }
 }
 
 #[test]
@@ -290,82 +340,86 @@ fn spot_turns_in_place() {
         vy: 0.0,
         wz,
     };
-    let (v, drift, worst) = walk_constant(cmd, 2.0, 4.0);
-    let err = (v[2] - wz).abs() / wz;
-    println!(
-        "command wz {wz} rad/s; mean over 4 s after a 2 s ramp: yaw rate {:.4} rad/s (error {:.1} %, tol 20 %), xy drift {:.4} m in 4 s (tol 0.3)",
-        v[2],
-        err * 100.0,
-        drift
-    );
-    println!(
-        "body height {:.4}..{:.4} m, max |roll| {:.4}, max |pitch| {:.4} rad (tol 0.15)",
-        worst.min_z, worst.max_z, worst.max_roll, worst.max_pitch
-    );
-    assert!(err <= 0.2, "yaw rate {} rad/s", v[2]);
-    assert!(drift <= 0.3);
-    assert!(worst.max_roll <= 0.15 && worst.max_pitch <= 0.15);
+    for rapier in Rapier::both() {
+        let (v, drift, worst) = walk_constant(rapier, cmd, 2.0, 4.0);
+        let err = (v[2] - wz).abs() / wz;
+        println!(
+            "{rapier} command wz {wz} rad/s; mean over 4 s after a 2 s ramp: yaw rate {:.4} rad/s (error {:.1} %, tol 20 %), xy drift {:.4} m in 4 s (tol 0.3)",
+            v[2],
+            err * 100.0,
+            drift
+        );
+        println!(
+            "{rapier} body height {:.4}..{:.4} m, max |roll| {:.4}, max |pitch| {:.4} rad (tol 0.15)",
+            worst.min_z, worst.max_z, worst.max_roll, worst.max_pitch
+        );
+        assert!(err <= 0.2, "{rapier} yaw rate {} rad/s", v[2]);
+        assert!(drift <= 0.3);
+        assert!(worst.max_roll <= 0.15 && worst.max_pitch <= 0.15);
+    }
 }
 
 #[test]
 fn spot_walks_sideways_and_stops() {
-    let cmd = BaseVelocity {
-        vx: 0.0,
-        vy: 0.3,
-        wz: 0.0,
-    };
-    let (v, _, worst) = walk_constant(cmd, 2.0, 4.0);
-    let err = (v[1] - 0.3).abs() / 0.3;
-    println!(
-        "command vy 0.3 m/s; mean over 4 s after a 2 s ramp: lateral {:.4} m/s (error {:.1} %, tol 25 %), forward {:+.4} m/s (tol 0.1), yaw rate {:+.4} rad/s (tol 0.1); max |roll| {:.4}, max |pitch| {:.4} rad",
-        v[1],
-        err * 100.0,
-        v[0],
-        v[2],
-        worst.max_roll,
-        worst.max_pitch
-    );
-    assert!(err <= 0.25, "lateral speed {} m/s", v[1]);
-    assert!(v[0].abs() <= 0.1 && v[2].abs() <= 0.1);
+    for rapier in Rapier::both() {
+        let cmd = BaseVelocity {
+            vx: 0.0,
+            vy: 0.3,
+            wz: 0.0,
+        };
+        let (v, _, worst) = walk_constant(rapier, cmd, 2.0, 4.0);
+        let err = (v[1] - 0.3).abs() / 0.3;
+        println!(
+            "{rapier} command vy 0.3 m/s; mean over 4 s after a 2 s ramp: lateral {:.4} m/s (error {:.1} %, tol 25 %), forward {:+.4} m/s (tol 0.1), yaw rate {:+.4} rad/s (tol 0.1); max |roll| {:.4}, max |pitch| {:.4} rad",
+            v[1],
+            err * 100.0,
+            v[0],
+            v[2],
+            worst.max_roll,
+            worst.max_pitch
+        );
+        assert!(err <= 0.25, "{rapier} lateral speed {} m/s", v[1]);
+        assert!(v[0].abs() <= 0.1 && v[2].abs() <= 0.1);
 
-    // Walk forward, then a zero command: the legs stop stepping and the body comes to rest.
-    // rapier's default solves friction only in the unbiased pass of a substep; planted
-    // multibody feet then creep about 1.5 cm/s even with the joints simply held (no trot
-    // controller). With friction in the bias pass as well they do not, so the creep of a standing
-    // robot is measured with that setting.
-    let mut w = Walker::new(TrotParams::default());
-    w.ctx.params.friction_in_bias_pass = true;
-    let mut worst = Worst::new();
-    w.run(
-        BaseVelocity {
-            vx: 0.4,
-            vy: 0.0,
-            wz: 0.3,
-        },
-        2.0,
-        &mut worst,
-    );
-    assert!(w.trot.stepping());
-    let zero = BaseVelocity::default();
-    let mut stopped_after = None;
-    for k in 0..(3.0 / CONTROL_DT) as usize {
-        w.control_step(zero, |_, _| {}, &mut worst);
-        if stopped_after.is_none() && !w.trot.stepping() {
-            stopped_after = Some((k + 1) as f64 * CONTROL_DT);
+        // Walk forward, then a zero command: the legs stop stepping and the body comes to rest.
+        // rapier's default solves friction only in the unbiased pass of a substep; planted
+        // multibody feet then creep about 1.5 cm/s even with the joints simply held (no trot
+        // controller). With friction in the bias pass as well they do not, so the creep of a standing
+        // robot is measured with that setting.
+        let mut w = Walker::new(TrotParams::default(), rapier);
+        w.ctx.params.friction_in_bias_pass = true;
+        let mut worst = Worst::new();
+        w.run(
+            BaseVelocity {
+                vx: 0.4,
+                vy: 0.0,
+                wz: 0.3,
+            },
+            2.0,
+            &mut worst,
+        );
+        assert!(w.trot.stepping());
+        let zero = BaseVelocity::default();
+        let mut stopped_after = None;
+        for k in 0..(3.0 / CONTROL_DT) as usize {
+            w.control_step(zero, |_, _| {}, &mut worst);
+            if stopped_after.is_none() && !w.trot.stepping() {
+                stopped_after = Some((k + 1) as f64 * CONTROL_DT);
+            }
         }
+        let before = w.base();
+        w.run(zero, 1.0, &mut worst);
+        let after = w.base();
+        let creep = (after.pos - before.pos).xy().norm();
+        println!(
+            "{rapier} zero command after walking: stepping stopped after {:?} s (tol 2 s); body moved {creep:.5} m in the following 1 s (tol 0.01); still standing: {}",
+            stopped_after,
+            !w.trot.stepping()
+        );
+        assert!(stopped_after.is_some_and(|t| t <= 2.0));
+        assert!(!w.trot.stepping());
+        assert!(creep <= 0.01);
     }
-    let before = w.base();
-    w.run(zero, 1.0, &mut worst);
-    let after = w.base();
-    let creep = (after.pos - before.pos).xy().norm();
-    println!(
-        "zero command after walking: stepping stopped after {:?} s (tol 2 s); body moved {creep:.5} m in the following 1 s (tol 0.01); still standing: {}",
-        stopped_after,
-        !w.trot.stepping()
-    );
-    assert!(stopped_after.is_some_and(|t| t <= 2.0));
-    assert!(!w.trot.stepping());
-    assert!(creep <= 0.01);
 }
 
 /// Sinusoidal arm motion around a raised pose, blended in from the stowed pose over 2 s.
@@ -394,8 +448,14 @@ struct RandomRun {
 /// `seconds` of random piecewise-constant commands (held 1 to 3 s; one in six is zero) from a
 /// seeded generator, optionally with the arm moving, and a `pull` N force in a random direction
 /// (per segment) on the gripper.
-fn random_commands(seed: u64, seconds: f64, pull: f64, arm_moving: bool) -> RandomRun {
-    let mut w = Walker::new(TrotParams::default());
+fn random_commands(
+    rapier: Rapier,
+    seed: u64,
+    seconds: f64,
+    pull: f64,
+    arm_moving: bool,
+) -> RandomRun {
+    let mut w = Walker::new(TrotParams::default(), rapier);
     let mut rng = EnvRng::from_seed(seed);
     let arm = w.spec.indices(&w.robot, w.spec.arm_joints).unwrap();
     let q0 = w.robot.joint_positions(&w.ctx).unwrap();
@@ -474,10 +534,13 @@ fn random_commands(seed: u64, seconds: f64, pull: f64, arm_moving: bool) -> Rand
 /// stance of the trot controller is what holds roll (see the locomotion module's notes).
 #[test]
 fn spot_does_not_fall_in_60_s_of_random_commands_with_arm_moving_and_a_pull() {
-    for seed in [2026, 7, 42] {
-        let r = random_commands(seed, 60.0, 20.0, true);
+    for (rapier, seed) in Rapier::both()
+        .into_iter()
+        .flat_map(|r| [2026, 7, 42].map(|seed| (r, seed)))
+    {
+        let r = random_commands(rapier, seed, 60.0, 20.0, true);
         println!(
-            "seed {seed}: 60 s, {} random commands, arm moving, 20 N pull on the gripper: walked {:.2} m; lowest body {:.4} m (tol > 0.3), max |roll| {:.4} rad, max |pitch| {:.4} rad (tol < 0.6)",
+            "{rapier} seed {seed}: 60 s, {} random commands, arm moving, 20 N pull on the gripper: walked {:.2} m; lowest body {:.4} m (tol > 0.3), max |roll| {:.4} rad, max |pitch| {:.4} rad (tol < 0.6)",
             r.segments, r.distance, r.worst.min_z, r.worst.max_roll, r.worst.max_pitch
         );
         assert!(r.worst.min_z > 0.3, "seed {seed}: the body came down");
@@ -493,20 +556,22 @@ fn spot_does_not_fall_in_60_s_of_random_commands_with_arm_moving_and_a_pull() {
 /// (this run reached 0.83 rad of roll before the trot controller's level stance).
 #[test]
 fn spot_does_not_fall_in_20_s_of_random_commands() {
-    let r = random_commands(2026, 20.0, 0.0, false);
-    println!(
-        "20 s, {} random commands (|vx|, |vy| <= 0.5 m/s, |wz| <= 1 rad/s), arm stowed, no pull: walked {:.2} m; lowest body {:.4} m (tol > 0.3), max |roll| {:.4} rad, max |pitch| {:.4} rad (tol < 0.6)",
+    for rapier in Rapier::both() {
+        let r = random_commands(rapier, 2026, 20.0, 0.0, false);
+        println!(
+        "{rapier} 20 s, {} random commands (|vx|, |vy| <= 0.5 m/s, |wz| <= 1 rad/s), arm stowed, no pull: walked {:.2} m; lowest body {:.4} m (tol > 0.3), max |roll| {:.4} rad, max |pitch| {:.4} rad (tol < 0.6)",
         r.segments, r.distance, r.worst.min_z, r.worst.max_roll, r.worst.max_pitch
     );
-    assert!(r.worst.min_z > 0.3);
-    assert!(r.worst.max_roll < 0.6 && r.worst.max_pitch < 0.6);
-    assert!(r.distance > 2.0, "the robot hardly moved");
+        assert!(r.worst.min_z > 0.3);
+        assert!(r.worst.max_roll < 0.6 && r.worst.max_pitch < 0.6);
+        assert!(r.distance > 2.0, "the robot hardly moved");
+    }
 }
 
 #[test]
 fn walking_is_deterministic() {
-    let a = random_commands(5, 4.0, 20.0, true);
-    let b = random_commands(5, 4.0, 20.0, true);
+    let a = random_commands(Rapier::alone(), 5, 4.0, 20.0, true);
+    let b = random_commands(Rapier::alone(), 5, 4.0, 20.0, true);
     let same_q =
         a.q.iter()
             .zip(&b.q)
@@ -532,13 +597,15 @@ fn walking_is_deterministic() {
     assert!(same_q && same_base);
 }
 
-/// Simulation speed of walking Spot: control steps of 1/60 s (4 substeps, the joint controller
-/// every substep, the trot controller every control step) per second of wall time. Run in
+/// Simulation speed of walking Spot alone: control steps of 1/60 s (its substeps, the trot and
+/// joint controllers every substep) per second of wall time. Run in
 /// release: `cargo test --release -p modesuite-robots --test locomotion -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn walking_spot_steps_per_second() {
-    let mut w = Walker::new(TrotParams::default());
+    let rapier = Rapier::alone();
+    let mut w = Walker::new(TrotParams::default(), rapier);
+    let dt = rapier.dt();
     let mut worst = Worst::new();
     let cmd = BaseVelocity {
         vx: 0.5,
@@ -550,16 +617,14 @@ fn walking_spot_steps_per_second() {
     let (mut t_trot, mut t_joint, mut t_physics) = (0.0, 0.0, 0.0);
     let t0 = std::time::Instant::now();
     for _ in 0..n {
-        let a = std::time::Instant::now();
-        w.trot
-            .step(&w.robot, &w.ctx, cmd, CONTROL_DT, &mut w.ctl)
-            .unwrap();
-        t_trot += a.elapsed().as_secs_f64();
-        for _ in 0..SUBSTEPS {
+        for _ in 0..rapier.substeps {
+            let a = std::time::Instant::now();
+            w.trot.step(&w.robot, &w.ctx, cmd, dt, &mut w.ctl).unwrap();
+            t_trot += a.elapsed().as_secs_f64();
             let b = std::time::Instant::now();
             w.ctl.apply(&w.robot, &mut w.ctx).unwrap();
             let c = std::time::Instant::now();
-            w.ctx.step(DT).unwrap();
+            w.ctx.step(dt).unwrap();
             t_joint += (c - b).as_secs_f64();
             t_physics += c.elapsed().as_secs_f64();
         }
@@ -572,8 +637,8 @@ fn walking_spot_steps_per_second() {
         100.0 * t_physics / secs
     );
     println!(
-        "walking spot: {n} control steps (dt 1/60 s, 4 substeps) in {secs:.3} s = {:.0} control steps/s ({:.0} substeps/s), target >= 2000",
+        "walking spot {rapier}: {n} control steps (dt 1/60 s) in {secs:.3} s = {:.0} control steps/s ({:.0} substeps/s), target >= 2000",
         n as f64 / secs,
-        4.0 * n as f64 / secs
+        (rapier.substeps * n) as f64 / secs
     );
 }
