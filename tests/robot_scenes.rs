@@ -242,6 +242,44 @@ fn robot_section_errors_name_the_field() {
     );
     println!("{e}");
     assert!(e.contains("colour"));
+    // the walking controller's parameters: only for legged robots, in range, known fields
+    let e = compile_err(
+        r#"Scene(objects: [], extensions: { "robots": [(name: "r", model: "franka", gait: (period: 0.3))] })"#,
+    );
+    println!("{e}");
+    assert!(e.contains("gait") && e.contains("legged"));
+    let e = compile_err(
+        r#"Scene(objects: [], extensions: { "robots": [(name: "r", model: "spot", gait: (period: -0.3))] })"#,
+    );
+    println!("{e}");
+    assert!(e.contains("gait") && e.contains("period"));
+    let e = compile_err(
+        r#"Scene(objects: [], extensions: { "robots": [(name: "r", model: "spot", gait: (perod: 0.3))] })"#,
+    );
+    println!("{e}");
+    assert!(e.contains("perod"));
+}
+
+#[test]
+fn a_scene_gait_sets_the_walking_controller() {
+    // The trot's command limit lowered to 0.25 m/s: a full forward action (0.5 m/s) walks at it.
+    let text = r#"Scene(
+    physics: (dt: 0.016666666666666666, substeps: 2, rigid_iterations: 1, rigid_pgs_iterations: 8),
+    objects: [(name: "ground", shape: Plane(size: (40.0, 40.0)), body: Static)],
+    extensions: { "robots": [(name: "spot", model: "spot", gait: (max_command: (0.25, 0.5, 1.0)))] },
+)"#;
+    let mut e = env(text);
+    let mut a = vec![0.0f32; e.spaces().action.flat_dim()];
+    a[0] = 1.0;
+    let mut x = Vec::new();
+    for _ in 0..300 {
+        let out = e.step(&a);
+        assert!(out.info.error.is_none(), "{:?}", out.info.error);
+        x.push(ee_and_base(&e).1.x);
+    }
+    let v = (x[299] - x[179]) / 2.0;
+    println!("spot with gait max_command 0.25 m/s, commanded 0.5: {v:.3} m/s (tol 0.25 +- 0.05)");
+    assert!((v - 0.25).abs() <= 0.05);
 }
 
 #[test]

@@ -169,6 +169,10 @@ pub struct RobotDesc {
     /// with the gripper action `Off` it stays closed).
     #[serde(default)]
     pub start_closed: bool,
+    /// Parameters of the walking controller (`base: Locomotion`), any subset of
+    /// [`TrotParams`]' fields (default: all at their defaults).
+    #[serde(default)]
+    pub gait: Option<TrotParams>,
 }
 
 /// A compiled robot: model, spec, modes.
@@ -199,7 +203,7 @@ impl SceneSection for RobotsSection {
     }
 
     fn description(&self) -> &str {
-        "robots of the scene: [(name, model, pose, actions, grasp_force_limit, script)]"
+        "robots of the scene: [(name, model, pose, actions, grasp_force_limit, script, start_closed, gait)]"
     }
 
     fn compile(&self, ctx: &SectionCompileContext) -> Result<CompiledSection, SceneError> {
@@ -254,6 +258,18 @@ impl SceneSection for RobotsSection {
                     limit.to_string(),
                     "a finite force > 0, N",
                 ));
+            }
+            if let Some(g) = &d.gait {
+                if spec.leg_joints.is_empty() {
+                    return Err(SceneError::semantic(
+                        format!("{path}.gait"),
+                        format!("{g:?}"),
+                        "no gait field: only legged robots (spot) walk",
+                    ));
+                }
+                g.check().map_err(|e| {
+                    SceneError::semantic(format!("{path}.gait"), format!("{g:?}"), e)
+                })?;
             }
             if let Some(s) = &d.script {
                 check_script(&path, s)?;
@@ -518,7 +534,7 @@ fn build_runtime(
             &robot,
             &c.model,
             &c.spec,
-            TrotParams::default(),
+            c.desc.gait.unwrap_or_default(),
         )?)
     } else {
         None

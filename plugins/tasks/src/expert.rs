@@ -385,8 +385,8 @@ impl Policy for CurtainExpert {
         let aligned = b.y.abs() < 0.06 && yaw.abs() < 0.06;
         let spot = rt.fixed.kind == RobotKind::Spot;
         // Through the curtain at 0.4 m/s; Spot at its top walking speed, 0.5 m/s: at 0.4 (and
-        // 1/120 s substeps) the curtain, wrapped round its front legs, held 5 of 20 seeds short
-        // of the line (0.3 m/s: 11 of 20); 0.5: 40 of 40.
+        // 1/120 s substeps) the curtain, wrapped round its front legs, held 5 to 8 of 20 seeds
+        // short of the line (0.3 m/s: 11 of 20); 0.5: 38 of 40.
         let fast = if spot { 0.5 } else { 0.4 };
         let vx = if aligned || b.x > 1.0 { fast } else { 0.2 };
         let v = Vector2::new(vx, -2.0 * b.y);
