@@ -141,6 +141,29 @@ fn schedules_have_no_ambiguities() {
 }
 
 #[test]
+fn rapier_solver_settings_reach_the_rigid_world() {
+    // rigid_iterations, rigid_pgs_iterations and rigid_friction_in_bias_pass become rapier's
+    // integration parameters; without them, rapier's defaults (4, 1, false).
+    for (text, want) in [
+        ("Scene()", (4, 1, false)),
+        (
+            "Scene(physics: (rigid_iterations: 1, rigid_pgs_iterations: 8, rigid_friction_in_bias_pass: true))",
+            (1, 8, true),
+        ),
+    ] {
+        let app = app_from_ron(text);
+        let p = &app.world.resource::<RigidContext>().params;
+        let got = (
+            p.num_solver_iterations,
+            p.num_internal_pgs_iterations,
+            p.friction_in_bias_pass,
+        );
+        println!("{text}: rapier (solver substeps, sweeps, friction in bias pass) = {got:?}");
+        assert_eq!(got, want);
+    }
+}
+
+#[test]
 fn decimation_and_substeps_are_counted() {
     let text = r#"Scene(physics: (dt: 0.01, substeps: 3, decimation: 4))"#;
     let mut app = app_from_ron(text);

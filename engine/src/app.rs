@@ -119,6 +119,8 @@ pub struct SimSettings {
     pub rigid_iterations: u32,
     /// Projected Gauss-Seidel sweeps per internal solver substep.
     pub rigid_pgs_iterations: u32,
+    /// Friction also in rapier's position-correcting (bias) pass.
+    pub rigid_friction_in_bias_pass: bool,
     /// Substeps per deformable step (1: every substep; the scene's `physics.substeps /
     /// physics.deformable_substeps`): deformable bodies step at the first substep of every
     /// `deformable_stride`, over that many substeps' time, before the rigid world's substep.
@@ -134,6 +136,7 @@ impl Default for SimSettings {
             gravity: nalgebra::Vector3::new(0.0, 0.0, -9.81),
             rigid_iterations: 4,
             rigid_pgs_iterations: 1,
+            rigid_friction_in_bias_pass: false,
             deformable_stride: 1,
         }
     }

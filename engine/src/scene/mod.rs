@@ -486,6 +486,7 @@ fn compile_inner(
         gravity: desc::gravity_of(&desc.physics),
         rigid_iterations: desc.physics.rigid_iterations,
         rigid_pgs_iterations: desc.physics.rigid_pgs_iterations,
+        rigid_friction_in_bias_pass: desc.physics.rigid_friction_in_bias_pass,
         deformable_stride: desc
             .physics
             .deformable_substeps
@@ -870,6 +871,7 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
         rigid.set_gravity(model.settings.gravity);
         rigid.params.num_solver_iterations = model.settings.rigid_iterations as usize;
         rigid.params.num_internal_pgs_iterations = model.settings.rigid_pgs_iterations as usize;
+        rigid.params.friction_in_bias_pass = model.settings.rigid_friction_in_bias_pass;
     }
     for (i, obj) in model.objects.iter().enumerate() {
         let entity = app
