@@ -260,16 +260,13 @@ impl SceneSection for RobotsSection {
                 ));
             }
             if let Some(g) = &d.gait {
+                let bad = |expected: String| {
+                    SceneError::semantic(format!("{path}.gait"), format!("{g:?}"), expected)
+                };
                 if spec.leg_joints.is_empty() {
-                    return Err(SceneError::semantic(
-                        format!("{path}.gait"),
-                        format!("{g:?}"),
-                        "no gait field: only legged robots (spot) walk",
-                    ));
+                    return Err(bad("no gait field: only legged robots (spot) walk".into()));
                 }
-                g.check().map_err(|e| {
-                    SceneError::semantic(format!("{path}.gait"), format!("{g:?}"), e)
-                })?;
+                g.check().map_err(bad)?;
             }
             if let Some(s) = &d.script {
                 check_script(&path, s)?;

@@ -22,7 +22,7 @@ const CONTROL_DT: f64 = 1.0 / 60.0;
 #[derive(Debug, Clone, Copy)]
 struct Rapier {
     substeps: usize,
-    pgs: usize,
+    pgs: u32,
 }
 
 impl Rapier {
@@ -32,11 +32,11 @@ impl Rapier {
         let spec = RobotSpec::of(RobotKind::Spot);
         Self {
             substeps: spec.substeps as usize,
-            pgs: spec.pgs_iterations as usize,
+            pgs: spec.pgs_iterations,
         }
     }
 
-    /// The task scenes whose FEM steps at 1/240 s (Spot Transport, Drag, Lift).
+    /// The task scenes whose FEM steps at 1/240 s (Spot Transport and Drag).
     const FINE: Self = Self {
         substeps: 4,
         pgs: 4,
@@ -87,8 +87,7 @@ fn euler(pose: &Isometry3<f64>) -> (f64, f64, f64) {
 impl Walker {
     fn new(params: TrotParams, rapier: Rapier) -> Self {
         let (spec, model) = common::model(RobotKind::Spot);
-        let mut ctx = common::scene_context(RobotKind::Spot);
-        ctx.params.num_internal_pgs_iterations = rapier.pgs;
+        let mut ctx = common::rapier_context(rapier.pgs);
         let robot = spec
             .spawn(&mut ctx, &model, Isometry3::identity())
             .expect("spot spawns");
@@ -384,8 +383,8 @@ fn spot_walks_sideways_and_stops() {
         // Walk forward, then a zero command: the legs stop stepping and the body comes to rest.
         // rapier's default solves friction only in the unbiased pass of a substep; planted
         // multibody feet then creep about 1.5 cm/s even with the joints simply held (no trot
-        // controller). With friction in the bias pass as well they do not, so the creep of a standing
-        // robot is measured with that setting.
+        // controller). With friction in the bias pass as well they do not, so the creep of a
+        // standing robot is measured with that setting.
         let mut w = Walker::new(TrotParams::default(), rapier);
         w.ctx.params.friction_in_bias_pass = true;
         let mut worst = Worst::new();
@@ -559,9 +558,9 @@ fn spot_does_not_fall_in_20_s_of_random_commands() {
     for rapier in Rapier::both() {
         let r = random_commands(rapier, 2026, 20.0, 0.0, false);
         println!(
-        "{rapier} 20 s, {} random commands (|vx|, |vy| <= 0.5 m/s, |wz| <= 1 rad/s), arm stowed, no pull: walked {:.2} m; lowest body {:.4} m (tol > 0.3), max |roll| {:.4} rad, max |pitch| {:.4} rad (tol < 0.6)",
-        r.segments, r.distance, r.worst.min_z, r.worst.max_roll, r.worst.max_pitch
-    );
+            "{rapier} 20 s, {} random commands (|vx|, |vy| <= 0.5 m/s, |wz| <= 1 rad/s), arm stowed, no pull: walked {:.2} m; lowest body {:.4} m (tol > 0.3), max |roll| {:.4} rad, max |pitch| {:.4} rad (tol < 0.6)",
+            r.segments, r.distance, r.worst.min_z, r.worst.max_roll, r.worst.max_pitch
+        );
         assert!(r.worst.min_z > 0.3);
         assert!(r.worst.max_roll < 0.6 && r.worst.max_pitch < 0.6);
         assert!(r.distance > 2.0, "the robot hardly moved");

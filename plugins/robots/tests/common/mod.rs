@@ -6,7 +6,7 @@ use modesuite_engine::RigidContext;
 use modesuite_robots::{AssetPaths, Robot, RobotKind, RobotSpec, UrdfModel};
 
 /// Physics substep of a robot alone: 1/60 s split into its `RobotSpec::substeps` (Franka 1/60 s,
-/// Spot 1/240 s), as its robot-only scenes and `modesuite bench robots` run it.
+/// Spot 1/120 s), as its robot-only scenes and `modesuite bench robots` run it.
 pub fn dt(kind: RobotKind) -> f64 {
     1.0 / (60.0 * f64::from(RobotSpec::of(kind).substeps))
 }
@@ -21,14 +21,19 @@ pub fn model(kind: RobotKind) -> (RobotSpec, UrdfModel) {
     (spec, model)
 }
 
-/// A rigid context with the rapier settings of the robot's scenes: one solver substep per step
-/// (`physics.rigid_iterations: 1`) and the robot's Gauss-Seidel sweeps
-/// (`RobotSpec::pgs_iterations`, `physics.rigid_pgs_iterations`).
-pub fn scene_context(kind: RobotKind) -> RigidContext {
+/// A rigid context with the rapier settings of robot scenes: one solver substep per step
+/// (`physics.rigid_iterations: 1`) and `pgs` Gauss-Seidel sweeps per substep
+/// (`physics.rigid_pgs_iterations`).
+pub fn rapier_context(pgs: u32) -> RigidContext {
     let mut ctx = RigidContext::new();
     ctx.params.num_solver_iterations = 1;
-    ctx.params.num_internal_pgs_iterations = RobotSpec::of(kind).pgs_iterations as usize;
+    ctx.params.num_internal_pgs_iterations = pgs as usize;
     ctx
+}
+
+/// [`rapier_context`] with the robot's own sweeps (`RobotSpec::pgs_iterations`).
+pub fn scene_context(kind: RobotKind) -> RigidContext {
+    rapier_context(RobotSpec::of(kind).pgs_iterations)
 }
 
 pub fn spawn(kind: RobotKind) -> (RigidContext, RobotSpec, Robot) {
