@@ -54,14 +54,15 @@ pub struct RobotSpec {
     /// (`physics.rigid_pgs_iterations`; rapier's default is 1): 4 for the Franka, whose seven
     /// arm motors, solved one after another, overshoot a 0.3 rad step by 8.8 % at 1/240 s and
     /// 16.5 % at 1/120 s with 1 sweep, 2.5 % and 3.6 % with 4 (robot tests,
-    /// `franka_pd_tracking_with_gravity_compensation`); 8 for Spot at 1/120 s, where 4 leave the
-    /// stance feet slipping (the trot walked 0.30 m/s for 0.5; a Spot holding its joints with 1
-    /// sweep crept 0.5 m in 3 s at 1/240 s).
+    /// `franka_pd_tracking_with_gravity_compensation`); 24 for Spot at 1/60 s, where the stance
+    /// feet need converged friction: with 8 the trot walked 0.34 m/s for 0.5 and fell under the
+    /// pulled arm, with 12 it drifted 0.11 m/s forward while side-stepping (tol 0.1), with 16
+    /// 0.07, with 24 0.05 (locomotion tests). Sweeps are cheap beside the multibody's mass
+    /// matrix: `bench robots` spot 3,052 steps/s with 16, 3,065 with 24, 2,947 with 32.
     pub pgs_iterations: u32,
     /// Physics substeps per 1/60 s step its controllers are validated at when it is alone
-    /// (`physics.substeps` of its robot-only scenes and of `modesuite bench robots`): 1 for the
-    /// Franka (the robot tests pass at 1/60 s), 2 for Spot (at 1/60 s its trot covered 1.0 m of
-    /// the 4.2 m `bench robots` walks in 10 s).
+    /// (`physics.substeps` of its robot-only scenes and of `modesuite bench robots`): 1 for
+    /// both (the robot and locomotion tests pass at 1/60 s).
     /// Scenes with deformables may take more (4 where the FEM steps at 1/240 s; Spot then
     /// walks with 4 sweeps, also validated).
     pub substeps: u32,
@@ -155,8 +156,8 @@ impl RobotSpec {
                     ("arm_sh1", -3.0),
                     ("arm_el0", 3.0),
                 ],
-                pgs_iterations: 8,
-                substeps: 2,
+                pgs_iterations: 24,
+                substeps: 1,
             },
         }
     }

@@ -26,8 +26,8 @@ struct Rapier {
 }
 
 impl Rapier {
-    /// Spot alone (`RobotSpec::substeps`, `RobotSpec::pgs_iterations`): robot-only scenes and
-    /// the tasks whose deformables step at 1/120 s.
+    /// Spot alone (`RobotSpec::substeps`, `RobotSpec::pgs_iterations`: 1 substep of 1/60 s, 24
+    /// sweeps): robot-only scenes and `bench robots`.
     fn alone() -> Self {
         let spec = RobotSpec::of(RobotKind::Spot);
         Self {
@@ -36,15 +36,22 @@ impl Rapier {
         }
     }
 
+    /// The task scenes whose FEM or cloth steps at 1/120 s with the robot (Spot Place, Bend,
+    /// Curtain, Uncover).
+    const MEDIUM: Self = Self {
+        substeps: 2,
+        pgs: 8,
+    };
+
     /// The task scenes whose FEM steps at 1/240 s (Spot Transport and Drag).
     const FINE: Self = Self {
         substeps: 4,
         pgs: 4,
     };
 
-    /// Both, for the validation rows.
-    fn both() -> [Self; 2] {
-        [Self::alone(), Self::FINE]
+    /// Every setting a scene walks Spot with, for the validation rows.
+    fn all() -> [Self; 3] {
+        [Self::alone(), Self::MEDIUM, Self::FINE]
     }
 
     fn dt(&self) -> f64 {
@@ -310,7 +317,7 @@ fn spot_walks_forward_at_half_a_metre_per_second() {
         vy: 0.0,
         wz: 0.0,
     };
-    for rapier in Rapier::both() {
+    for rapier in Rapier::all() {
         let (v, _, worst) = walk_constant(rapier, cmd, 2.0, 4.0);
         let err = (v[0] - 0.5).abs() / 0.5;
         println!(
@@ -339,7 +346,7 @@ fn spot_turns_in_place() {
         vy: 0.0,
         wz,
     };
-    for rapier in Rapier::both() {
+    for rapier in Rapier::all() {
         let (v, drift, worst) = walk_constant(rapier, cmd, 2.0, 4.0);
         let err = (v[2] - wz).abs() / wz;
         println!(
@@ -360,7 +367,7 @@ fn spot_turns_in_place() {
 
 #[test]
 fn spot_walks_sideways_and_stops() {
-    for rapier in Rapier::both() {
+    for rapier in Rapier::all() {
         let cmd = BaseVelocity {
             vx: 0.0,
             vy: 0.3,
@@ -533,7 +540,7 @@ fn random_commands(
 /// stance of the trot controller is what holds roll (see the locomotion module's notes).
 #[test]
 fn spot_does_not_fall_in_60_s_of_random_commands_with_arm_moving_and_a_pull() {
-    for (rapier, seed) in Rapier::both()
+    for (rapier, seed) in Rapier::all()
         .into_iter()
         .flat_map(|r| [2026, 7, 42].map(|seed| (r, seed)))
     {
@@ -555,7 +562,7 @@ fn spot_does_not_fall_in_60_s_of_random_commands_with_arm_moving_and_a_pull() {
 /// (this run reached 0.83 rad of roll before the trot controller's level stance).
 #[test]
 fn spot_does_not_fall_in_20_s_of_random_commands() {
-    for rapier in Rapier::both() {
+    for rapier in Rapier::all() {
         let r = random_commands(rapier, 2026, 20.0, 0.0, false);
         println!(
             "{rapier} 20 s, {} random commands (|vx|, |vy| <= 0.5 m/s, |wz| <= 1 rad/s), arm stowed, no pull: walked {:.2} m; lowest body {:.4} m (tol > 0.3), max |roll| {:.4} rad, max |pitch| {:.4} rad (tol < 0.6)",

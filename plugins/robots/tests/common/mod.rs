@@ -5,8 +5,8 @@ use modesuite_engine::deps::nalgebra::Isometry3;
 use modesuite_engine::RigidContext;
 use modesuite_robots::{AssetPaths, Robot, RobotKind, RobotSpec, UrdfModel};
 
-/// Physics substep of a robot alone: 1/60 s split into its `RobotSpec::substeps` (Franka 1/60 s,
-/// Spot 1/120 s), as its robot-only scenes and `modesuite bench robots` run it.
+/// Physics substep of a robot alone: 1/60 s split into its `RobotSpec::substeps` (1/60 s for
+/// both robots), as its robot-only scenes and `modesuite bench robots` run it.
 pub fn dt(kind: RobotKind) -> f64 {
     1.0 / (60.0 * f64::from(RobotSpec::of(kind).substeps))
 }
