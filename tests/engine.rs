@@ -313,8 +313,15 @@ fn bad_input_is_reported_with_object_field_and_value() {
     expect_semantic(
         "Scene(physics: (substeps: 4, deformable_substeps: Some(3)))",
         "physics.deformable_substeps",
-        "divisor of physics.substeps (4)",
+        "divisor or multiple (at most 1000) of physics.substeps (4)",
     );
+    expect_semantic(
+        "Scene(physics: (substeps: 4, deformable_substeps: Some(6)))",
+        "physics.deformable_substeps",
+        "divisor or multiple",
+    );
+    compile_text("Scene(physics: (substeps: 4, deformable_substeps: Some(8)))")
+        .unwrap_or_else(|e| panic!("a multiple of substeps is valid: {e}"));
     expect_semantic(
         "Scene(physics: (rigid_pgs_iterations: 0))",
         "physics.rigid_pgs_iterations",
@@ -482,6 +489,53 @@ fn coupling_query_finds_closest_points_normals_and_bodies() {
     out.clear();
     rigid.contacts_near(&nalgebra::Vector3::new(0.0, 0.0, 3.0), 0.1, &mut out);
     assert!(out.is_empty());
+}
+
+#[test]
+fn body_pose_at_extrapolates_a_body_at_its_velocity() {
+    // A spinning, drifting cube without gravity: rapier moves it at constant velocity, so the
+    // pose extrapolated from the start matches the stepped pose (f32 integration).
+    let text = r#"Scene(physics: (dt: 0.01, substeps: 1, gravity: (0.0, 0.0, 0.0)), objects: [
+        (name: "cube", shape: Box(size: (0.2, 0.2, 0.2)), pose: (pos: (0.3, -0.1, 1.0), rpy: (0.2, 0.1, 0.3)),
+         body: Dynamic(linear_velocity: (0.5, -0.2, 0.1), angular_velocity: (0.0, 0.0, 2.0))),
+    ])"#;
+    let mut env = Env::new(app_from_ron(text));
+    env.autoreset = false;
+    env.reset(Some(0));
+    let id = 0;
+    let (now, ahead) = {
+        let rigid = env.app.world.resource::<RigidContext>();
+        (
+            rigid.body_pose(id).unwrap(),
+            rigid.body_pose_at(id, 0.05).unwrap(),
+        )
+    };
+    assert_eq!(
+        now,
+        env.app
+            .world
+            .resource::<RigidContext>()
+            .body_pose_at(id, 0.0)
+            .unwrap()
+    );
+    for _ in 0..5 {
+        env.step(&[]);
+    }
+    let stepped = env
+        .app
+        .world
+        .resource::<RigidContext>()
+        .body_pose(id)
+        .unwrap();
+    let dx = (stepped.translation.vector - ahead.translation.vector).norm();
+    let moved = (stepped.translation.vector - now.translation.vector).norm();
+    let da = stepped.rotation.angle_to(&ahead.rotation);
+    let turned = stepped.rotation.angle_to(&now.rotation);
+    println!(
+        "after 0.05 s: extrapolated vs stepped {dx:.2e} m (tol 1e-4; moved {moved:.4} m), {da:.2e} rad (tol 1e-4; turned {turned:.4} rad)"
+    );
+    assert!(dx < 1e-4 && da < 1e-4);
+    assert!(moved > 0.02 && turned > 0.09);
 }
 
 #[test]

@@ -125,6 +125,11 @@ pub struct SimSettings {
     /// physics.deformable_substeps`): deformable bodies step at the first substep of every
     /// `deformable_stride`, over that many substeps' time, before the rigid world's substep.
     pub deformable_stride: u32,
+    /// Deformable steps per substep (1: one; the scene's `physics.deformable_substeps /
+    /// physics.substeps` when that is larger): each substep's deformable step is split into
+    /// this many, the `i`-th seeing the rigid bodies extrapolated at constant velocity to its
+    /// start (`i * substep / deformable_inner` after the substep's rigid state).
+    pub deformable_inner: u32,
 }
 
 impl Default for SimSettings {
@@ -138,6 +143,7 @@ impl Default for SimSettings {
             rigid_pgs_iterations: 1,
             rigid_friction_in_bias_pass: false,
             deformable_stride: 1,
+            deformable_inner: 1,
         }
     }
 }

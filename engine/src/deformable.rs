@@ -33,6 +33,22 @@ pub trait DeformableSolver: Send + Sync + 'static {
         query: &dyn ContactQuery,
         reactions: &mut Vec<Reaction>,
     ) -> Result<(), String>;
+    /// [`DeformableSolver::step_coupled`] for a step that starts `t0` seconds after the rigid
+    /// state `query` describes (several deformable steps per rigid substep,
+    /// `physics.deformable_substeps`): a solver that extrapolates moving colliders over its
+    /// step should extrapolate them over `t0 + dt`. Default: `step_coupled`, colliders seen
+    /// from the rigid state.
+    fn step_coupled_at(
+        &mut self,
+        t0: f64,
+        dt: f64,
+        gravity: &Vector3<f64>,
+        query: &dyn ContactQuery,
+        reactions: &mut Vec<Reaction>,
+    ) -> Result<(), String> {
+        let _ = t0;
+        self.step_coupled(dt, gravity, query, reactions)
+    }
     /// Current node or particle positions, m, world frame.
     fn node_positions(&self) -> &[Vector3<f64>];
     /// The complete state (bit-exact round trip with `load`).
@@ -265,52 +281,63 @@ fn deformable_step<S: DeformableSolver>(
         return;
     }
     let h = settings.substep_dt();
-    let dt = h * stride as f64;
-    // Time at the start of this substep: the physics step's start plus the substeps done in it.
-    let time = clock.time + index as f64 * h;
+    let inner = settings.deformable_inner.max(1);
+    let dt = h * stride as f64 / f64::from(inner);
     let mut reactions: Vec<Reaction> = Vec::new();
     let mut empty = PluginStates::default();
     let mut buffer = Vec::new();
     if let Some(r) = rigid.as_deref_mut() {
         r.refresh_queries();
     }
-    for body in &mut ctx.bodies {
-        if let (Some(terms), Ok(object)) = (terms.as_deref(), names.get(body.entity)) {
-            let states = states.as_deref_mut().unwrap_or(&mut empty);
-            if let Err(e) = apply_passive_forces(
-                terms,
-                object,
-                &mut body.solver,
-                time,
-                dt,
-                states,
-                &mut buffer,
-            ) {
-                errors.raise(format!("object \"{}\": {e}", object.name));
-                continue;
+    for k in 0..inner {
+        // Seconds after the rigid state: the deformable step's start within the substep.
+        let t0 = f64::from(k) * dt;
+        // Time at the start of this step: the physics step's start plus the substeps done in it.
+        let time = clock.time + index as f64 * h + t0;
+        for body in &mut ctx.bodies {
+            if let (Some(terms), Ok(object)) = (terms.as_deref(), names.get(body.entity)) {
+                let states = states.as_deref_mut().unwrap_or(&mut empty);
+                if let Err(e) = apply_passive_forces(
+                    terms,
+                    object,
+                    &mut body.solver,
+                    time,
+                    dt,
+                    states,
+                    &mut buffer,
+                ) {
+                    errors.raise(format!("object \"{}\": {e}", object.name));
+                    continue;
+                }
             }
-        }
-        if let Some(r) = rigid.as_deref() {
-            let grippers = grippers.as_deref().map_or(&[][..], |g| &g.0);
-            if let Err(e) = sync_grippers(&mut body.solver, grippers, &|id| r.body_pose(id)) {
+            if let Some(r) = rigid.as_deref() {
+                let grippers = grippers.as_deref().map_or(&[][..], |g| &g.0);
+                if let Err(e) =
+                    sync_grippers(&mut body.solver, grippers, &|id| r.body_pose_at(id, t0))
+                {
+                    let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
+                    errors.raise(format!("object \"{name}\": {e}"));
+                    continue;
+                }
+            }
+            let query: &dyn ContactQuery = match rigid.as_deref() {
+                Some(r) => r,
+                None => &NoColliders,
+            };
+            let before = reactions.len();
+            let stepped = if inner == 1 {
+                body.solver
+                    .step_coupled(dt, &settings.gravity, query, &mut reactions)
+            } else {
+                body.solver
+                    .step_coupled_at(t0, dt, &settings.gravity, query, &mut reactions)
+            };
+            if let Err(e) = stepped {
+                // The solver rolled its state back: the impulses of the failed step never happened.
+                reactions.truncate(before);
                 let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
                 errors.raise(format!("object \"{name}\": {e}"));
-                continue;
             }
-        }
-        let query: &dyn ContactQuery = match rigid.as_deref() {
-            Some(r) => r,
-            None => &NoColliders,
-        };
-        let before = reactions.len();
-        if let Err(e) = body
-            .solver
-            .step_coupled(dt, &settings.gravity, query, &mut reactions)
-        {
-            // The solver rolled its state back: the impulses of the failed step never happened.
-            reactions.truncate(before);
-            let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
-            errors.raise(format!("object \"{name}\": {e}"));
         }
     }
     if let Some(r) = rigid.as_deref_mut() {

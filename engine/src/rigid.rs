@@ -249,6 +249,28 @@ impl RigidContext {
         self.bodies.get(h).map(|b| pose_from_rapier(b.position()))
     }
 
+    /// Pose of a body id `t` seconds after the current state, extrapolated at its current
+    /// velocity (translation of the centre of mass by `v t`, rotation by `w t` about it); `t = 0`
+    /// gives [`RigidContext::body_pose`] exactly. What deformables stepping several times per
+    /// rigid substep follow (`physics.deformable_substeps`).
+    pub fn body_pose_at(&self, id: u32, t: f64) -> Option<Isometry3<f64>> {
+        let (h, _) = self.body_of_id(id)?;
+        let b = self.bodies.get(h)?;
+        let pose = pose_from_rapier(b.position());
+        if t == 0.0 {
+            return Some(pose);
+        }
+        let v = vec_from_rapier(b.linvel());
+        let w = vec_from_rapier(b.angvel());
+        let com = vec_from_rapier(b.center_of_mass());
+        let turn = nalgebra::UnitQuaternion::from_scaled_axis(w * t);
+        let origin = com + v * t + turn * (pose.translation.vector - com);
+        Some(Isometry3::from_parts(
+            nalgebra::Translation3::from(origin),
+            turn * pose.rotation,
+        ))
+    }
+
     /// Appends the world positions (m) of the rigid contact points whose separation was at most
     /// `max_distance` m (negative: penetration) after the last rapier step: the midpoint of the
     /// two surface points of every tracked point of every contact manifold, in the narrow

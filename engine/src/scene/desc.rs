@@ -150,6 +150,9 @@ pub struct PhysicsDesc {
     /// Deformable steps per physics step (default: `substeps`). A divisor of `substeps`:
     /// deformable bodies (FEM, cloth) then step every `substeps / deformable_substeps` rigid
     /// substeps, over that much time, while the rigid world (robots) keeps its finer substeps.
+    /// A multiple of `substeps`: they step `deformable_substeps / substeps` times per rigid
+    /// substep, each seeing the rigid bodies extrapolated at constant velocity to its start,
+    /// while the rigid world (robots) takes the coarser substeps.
     #[serde(default)]
     pub deformable_substeps: Option<u32>,
 }

@@ -289,12 +289,13 @@ fn validate_physics(p: &PhysicsDesc) -> Result<(), SceneError> {
         ));
     }
     if let Some(d) = p.deformable_substeps {
-        if d == 0 || !p.substeps.is_multiple_of(d) {
+        let fits = d > 0 && (p.substeps.is_multiple_of(d) || d.is_multiple_of(p.substeps));
+        if !fits || d > 1000 {
             return Err(SceneError::semantic(
                 "physics.deformable_substeps",
                 d.to_string(),
                 format!(
-                    "a positive divisor of physics.substeps ({}), or leave it out for one deformable step per substep",
+                    "a positive divisor or multiple (at most 1000) of physics.substeps ({}), or leave it out for one deformable step per substep",
                     p.substeps
                 ),
             ));
@@ -490,7 +491,11 @@ fn compile_inner(
         deformable_stride: desc
             .physics
             .deformable_substeps
-            .map_or(1, |d| desc.physics.substeps / d),
+            .map_or(1, |d| (desc.physics.substeps / d).max(1)),
+        deformable_inner: desc
+            .physics
+            .deformable_substeps
+            .map_or(1, |d| (d / desc.physics.substeps).max(1)),
     };
     if let Some(0) = desc.episode_steps {
         return Err(SceneError::semantic(

@@ -80,6 +80,18 @@ impl DeformableSolver for FemSolid {
             .map(|_| ())
             .map_err(|e| e.to_string())
     }
+    fn step_coupled_at(
+        &mut self,
+        t0: f64,
+        dt: f64,
+        gravity: &Vector3<f64>,
+        query: &dyn ContactQuery,
+        reactions: &mut Vec<Reaction>,
+    ) -> Result<(), String> {
+        self.step_at(t0, dt, *gravity, query, reactions)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    }
     fn node_positions(&self) -> &[Vector3<f64>] {
         self.positions()
     }

@@ -1964,6 +1964,21 @@ impl FemSolid {
         contacts: &dyn ContactQuery,
         reactions: &mut Vec<Reaction>,
     ) -> Result<StepStats, FemError> {
+        self.step_at(0.0, dt, gravity, contacts, reactions)
+    }
+
+    /// [`FemSolid::step`] for a step that starts `t0` seconds (>= 0) after the rigid state
+    /// `contacts` describes: moving colliders are extrapolated at their surface velocity over
+    /// `t0 + dt` (and searched for that much further), as the halves of a split step are.
+    /// Several solid steps per rigid substep use it (`physics.deformable_substeps`).
+    pub fn step_at(
+        &mut self,
+        t0: f64,
+        dt: f64,
+        gravity: Vector3<f64>,
+        contacts: &dyn ContactQuery,
+        reactions: &mut Vec<Reaction>,
+    ) -> Result<StepStats, FemError> {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(FemError::InvalidParameter {
                 name: "dt",
@@ -1971,10 +1986,17 @@ impl FemSolid {
                 expected: "finite and > 0 (s)",
             });
         }
+        if !(t0.is_finite() && t0 >= 0.0) {
+            return Err(FemError::InvalidParameter {
+                name: "t0",
+                value: t0,
+                expected: "finite and >= 0 (s)",
+            });
+        }
         if !finite3(&gravity) {
             return Err(FemError::NonFiniteInput("gravity"));
         }
-        let result = self.step_split(dt, 0.0, gravity, contacts, reactions, MAX_STEP_HALVINGS);
+        let result = self.step_split(dt, t0, gravity, contacts, reactions, MAX_STEP_HALVINGS);
         if result.is_ok() {
             self.steps += 1;
         }
