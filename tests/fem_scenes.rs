@@ -224,6 +224,14 @@ fn falling_block(physics: &str) -> Vec<Vector3<f64>> {
     nodes(&mut env, "block")
 }
 
+/// Largest distance between corresponding nodes of two runs, m.
+fn largest_gap(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn deformable_substeps_step_deformables_at_their_own_rate() {
     // 4 rigid substeps with 2 deformable steps per physics step: the solid moves as with 2
@@ -232,13 +240,7 @@ fn deformable_substeps_step_deformables_at_their_own_rate() {
         falling_block("(dt: 0.016666666666666666, substeps: 4, deformable_substeps: Some(2))");
     let two = falling_block("(dt: 0.016666666666666666, substeps: 2)");
     let four = falling_block("(dt: 0.016666666666666666, substeps: 4)");
-    let diff = |a: &[Vector3<f64>], b: &[Vector3<f64>]| {
-        a.iter()
-            .zip(b)
-            .map(|(p, q)| (p - q).norm())
-            .fold(0.0, f64::max)
-    };
-    let (d2, d4) = (diff(&strided, &two), diff(&strided, &four));
+    let (d2, d4) = (largest_gap(&strided, &two), largest_gap(&strided, &four));
     println!("after 20 steps of free fall: strided vs 2 substeps {d2:.2e} m (<= 1e-9), vs 4 substeps {d4:.2e} m (> 1e-6)");
     assert!(d2 <= 1e-9);
     assert!(d4 > 1e-6);
@@ -255,13 +257,7 @@ fn deformable_substeps_above_substeps_split_each_rigid_substep() {
         falling_block("(dt: 0.016666666666666666, substeps: 1, deformable_substeps: Some(4))");
     let four = falling_block("(dt: 0.016666666666666666, substeps: 4)");
     let one = falling_block("(dt: 0.016666666666666666, substeps: 1)");
-    let diff = |a: &[Vector3<f64>], b: &[Vector3<f64>]| {
-        a.iter()
-            .zip(b)
-            .map(|(p, q)| (p - q).norm())
-            .fold(0.0, f64::max)
-    };
-    let (d4, d1) = (diff(&split, &four), diff(&split, &one));
+    let (d4, d1) = (largest_gap(&split, &four), largest_gap(&split, &one));
     println!("after 20 steps of free fall: split vs 4 substeps {d4:.2e} m (<= 1e-9), vs 1 substep {d1:.2e} m (> 1e-6)");
     assert!(d4 <= 1e-9);
     assert!(d1 > 1e-6);
