@@ -257,17 +257,20 @@ pub const TASK_ROUNDS: usize = 4;
 pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
     for id in modesuite_tasks::IMPLEMENTED {
-        let make = || -> Result<modesuite_engine::Env, String> {
-            let mut e = crate::cli::env_for_target(id, None).map_err(|e| format!("{id}: {e}"))?;
-            e.reset(Some(0));
-            Ok(e)
+        // 16 envs sharing one compiled scene, as a `VecEnv` of a task gets them
+        let make = || -> Result<Vec<modesuite_engine::Env>, String> {
+            let mut envs =
+                crate::cli::envs_for_target(id, None, 16).map_err(|e| format!("{id}: {e}"))?;
+            for e in &mut envs {
+                e.reset(Some(0));
+            }
+            Ok(envs)
         };
-        let mut singles = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
+        let mut singles = make()?;
         let zero = vec![0.0f32; singles[0].spaces().action.flat_dim()];
         let actions = vec![0.0f32; 16 * zero.len()];
         let x16_envs = |threads: usize| -> Result<modesuite_engine::VecEnv, String> {
-            let envs = (0..16).map(|_| make()).collect::<Result<Vec<_>, _>>()?;
-            modesuite_engine::VecEnv::new(envs, threads).map_err(|e| e.to_string())
+            modesuite_engine::VecEnv::new(make()?, threads).map_err(|e| e.to_string())
         };
         let time_x16 = |venv: &mut modesuite_engine::VecEnv, w: usize| -> Result<f64, String> {
             let t = Instant::now();

@@ -1287,3 +1287,33 @@ fn rgbd_observation_of_the_robot_camera_follows_the_state_terms() {
         "{e}"
     );
 }
+
+#[test]
+fn envs_sharing_one_compiled_scene_step_as_separately_built_ones() {
+    // `envs_for_target` compiles the scene once for all its envs (a `VecEnv`'s, the bench's):
+    // each must still be its own world, bit-identical to an env built alone.
+    for id in [PLACE, "MoDe-Spot-Uncover-v0"] {
+        let mut shared = modesuite::cli::envs_for_target(id, None, 3).unwrap();
+        let mut alone = modesuite::cli::env_for_target(id, None).unwrap();
+        for (seed, e) in shared.iter_mut().enumerate() {
+            e.reset(Some(seed as u64));
+        }
+        alone.reset(Some(2));
+        let mut action = vec![0.0f32; alone.spaces().action.flat_dim()];
+        action[0] = 0.5;
+        for _ in 0..30 {
+            for e in &mut shared {
+                assert!(e.step(&action).info.error.is_none());
+            }
+            assert!(alone.step(&action).info.error.is_none());
+        }
+        let hashes: Vec<u64> = shared.iter().map(|e| e.state_hash()).collect();
+        println!(
+            "{id}: shared envs (seeds 0, 1, 2) {hashes:x?}, alone (seed 2) {:x}",
+            alone.state_hash()
+        );
+        assert_eq!(hashes[2], alone.state_hash());
+        assert_ne!(hashes[0], hashes[2]);
+        assert_ne!(hashes[0], hashes[1]);
+    }
+}
