@@ -325,14 +325,10 @@ fn deformable_step<S: DeformableSolver>(
                 None => &NoColliders,
             };
             let before = reactions.len();
-            let stepped = if inner == 1 {
-                body.solver
-                    .step_coupled(dt, &settings.gravity, query, &mut reactions)
-            } else {
+            if let Err(e) =
                 body.solver
                     .step_coupled_at(t0, dt, &settings.gravity, query, &mut reactions)
-            };
-            if let Err(e) = stepped {
+            {
                 // The solver rolled its state back: the impulses of the failed step never happened.
                 reactions.truncate(before);
                 let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
