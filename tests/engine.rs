@@ -492,9 +492,10 @@ fn coupling_query_finds_closest_points_normals_and_bodies() {
 }
 
 #[test]
-fn body_pose_at_extrapolates_a_body_at_its_velocity() {
-    // A spinning, drifting cube without gravity: rapier moves it at constant velocity, so the
-    // pose extrapolated from the start matches the stepped pose (f32 integration).
+fn body_pose_between_interpolates_the_last_rigid_step() {
+    // A spinning, drifting cube without gravity: halfway through a step it is halfway between
+    // its poses before and after it; the end of the step is the current pose exactly, and a
+    // body moved outside a step (a reset) has nothing to interpolate from.
     let text = r#"Scene(physics: (dt: 0.01, substeps: 1, gravity: (0.0, 0.0, 0.0)), objects: [
         (name: "cube", shape: Box(size: (0.2, 0.2, 0.2)), pose: (pos: (0.3, -0.1, 1.0), rpy: (0.2, 0.1, 0.3)),
          body: Dynamic(linear_velocity: (0.5, -0.2, 0.1), angular_velocity: (0.0, 0.0, 2.0))),
@@ -503,39 +504,36 @@ fn body_pose_at_extrapolates_a_body_at_its_velocity() {
     env.autoreset = false;
     env.reset(Some(0));
     let id = 0;
-    let (now, ahead) = {
+    let pose = |env: &Env, s: Option<f64>| {
         let rigid = env.app.world.resource::<RigidContext>();
-        (
-            rigid.body_pose(id).unwrap(),
-            rigid.body_pose_at(id, 0.05).unwrap(),
-        )
+        match s {
+            Some(s) => rigid.body_pose_between(id, s).unwrap(),
+            None => rigid.body_pose(id).unwrap(),
+        }
     };
+    let before = pose(&env, None);
     assert_eq!(
-        now,
-        env.app
-            .world
-            .resource::<RigidContext>()
-            .body_pose_at(id, 0.0)
-            .unwrap()
+        pose(&env, Some(0.0)),
+        before,
+        "after a reset: the current pose"
     );
-    for _ in 0..5 {
-        env.step(&[]);
-    }
-    let stepped = env
-        .app
-        .world
-        .resource::<RigidContext>()
-        .body_pose(id)
-        .unwrap();
-    let dx = (stepped.translation.vector - ahead.translation.vector).norm();
-    let moved = (stepped.translation.vector - now.translation.vector).norm();
-    let da = stepped.rotation.angle_to(&ahead.rotation);
-    let turned = stepped.rotation.angle_to(&now.rotation);
+    env.step(&[]);
+    let after = pose(&env, None);
+    assert_eq!(pose(&env, Some(1.0)), after);
+    let start = pose(&env, Some(0.0));
+    let mid = pose(&env, Some(0.5));
+    let d0 = (start.translation.vector - before.translation.vector).norm();
+    let dm = (mid.translation.vector
+        - (before.translation.vector + after.translation.vector) / 2.0)
+        .norm();
+    let am =
+        mid.rotation.angle_to(&before.rotation) - 0.5 * after.rotation.angle_to(&before.rotation);
     println!(
-        "after 0.05 s: extrapolated vs stepped {dx:.2e} m (tol 1e-4; moved {moved:.4} m), {da:.2e} rad (tol 1e-4; turned {turned:.4} rad)"
+        "step start vs pose before the step {d0:.1e} m (tol 1e-6), midpoint {dm:.1e} m (tol 1e-9), half turn {am:.1e} rad (tol 1e-9); moved {:.4} m",
+        (after.translation.vector - before.translation.vector).norm()
     );
-    assert!(dx < 1e-4 && da < 1e-4);
-    assert!(moved > 0.02 && turned > 0.09);
+    assert!(d0 < 1e-6 && dm < 1e-9 && am.abs() < 1e-9);
+    assert!((after.translation.vector - before.translation.vector).norm() > 0.005);
 }
 
 #[test]

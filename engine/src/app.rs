@@ -127,8 +127,10 @@ pub struct SimSettings {
     pub deformable_stride: u32,
     /// Deformable steps per substep (1: one; the scene's `physics.deformable_substeps /
     /// physics.substeps` when that is larger): each substep's deformable step is split into
-    /// this many, the `i`-th seeing the rigid bodies extrapolated at constant velocity to its
-    /// start (`i * substep / deformable_inner` after the substep's rigid state).
+    /// this many, the `i`-th (from 0) following the rigid bodies to their poses
+    /// `(i + 1) / deformable_inner` of the way through the last rigid substep
+    /// (`RigidContext::body_pose_between`), while colliders are extrapolated from
+    /// `i * substep / deformable_inner` after the rigid state.
     pub deformable_inner: u32,
 }
 

@@ -312,8 +312,10 @@ fn deformable_step<S: DeformableSolver>(
             }
             if let Some(r) = rigid.as_deref() {
                 let grippers = grippers.as_deref().map_or(&[][..], |g| &g.0);
+                // Where the bodies were at the end of this step, one rigid substep behind.
+                let s = f64::from(k + 1) / f64::from(inner);
                 if let Err(e) =
-                    sync_grippers(&mut body.solver, grippers, &|id| r.body_pose_at(id, t0))
+                    sync_grippers(&mut body.solver, grippers, &|id| r.body_pose_between(id, s))
                 {
                     let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
                     errors.raise(format!("object \"{name}\": {e}"));

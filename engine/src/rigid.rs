@@ -130,6 +130,9 @@ pub struct RigidContext {
     body_ids: Vec<(RigidBodyHandle, Entity)>,
     /// Reactions pushed by deformables, applied as forces in the next rapier step.
     pending: Vec<Reaction>,
+    /// Pose of every body id at the start of the last rapier step (empty after bodies were
+    /// moved outside a step): what [`RigidContext::body_pose_between`] interpolates from.
+    step_start: Vec<Isometry3<f64>>,
     /// Query acceleration: a BVH over the colliders' current AABBs, leaf -> collider.
     query_bvh: Bvh,
     query_leaves: Vec<QueryLeaf>,
@@ -151,6 +154,7 @@ struct RigidState {
     ccd: CCDSolver,
     soft_bodies: SoftBodySet,
     pending: Vec<Reaction>,
+    step_start: Vec<Isometry3<f64>>,
 }
 
 impl Default for RigidContext {
@@ -177,6 +181,7 @@ impl RigidContext {
             gravity: Vector3::new(0.0, 0.0, -9.81),
             body_ids: Vec::new(),
             pending: Vec::new(),
+            step_start: Vec::new(),
             query_bvh: Bvh::new(),
             query_leaves: Vec::new(),
             queries_stale: true,
@@ -249,25 +254,27 @@ impl RigidContext {
         self.bodies.get(h).map(|b| pose_from_rapier(b.position()))
     }
 
-    /// Pose of a body id `t` seconds after the current state, extrapolated at its current
-    /// velocity (translation of the centre of mass by `v t`, rotation by `w t` about it); `t = 0`
-    /// gives [`RigidContext::body_pose`] exactly. What deformables stepping several times per
-    /// rigid substep follow (`physics.deformable_substeps`).
-    pub fn body_pose_at(&self, id: u32, t: f64) -> Option<Isometry3<f64>> {
-        let (h, _) = self.body_of_id(id)?;
-        let b = self.bodies.get(h)?;
-        let pose = pose_from_rapier(b.position());
-        if t == 0.0 {
-            return Some(pose);
-        }
-        let v = vec_from_rapier(b.linvel());
-        let w = vec_from_rapier(b.angvel());
-        let com = vec_from_rapier(b.center_of_mass());
-        let turn = nalgebra::UnitQuaternion::from_scaled_axis(w * t);
-        let origin = com + v * t + turn * (pose.translation.vector - com);
+    /// Pose of a body id a fraction `s` (0..=1) of the way through the last rapier step: its
+    /// pose at that step's start interpolated towards its current pose (translation linearly,
+    /// rotation by slerp); `s >= 1`, a body that did not exist then, or any body after
+    /// [`RigidContext::bodies_moved`] gives [`RigidContext::body_pose`] exactly. What
+    /// deformables stepping several times per rigid substep follow
+    /// (`physics.deformable_substeps`): the last rigid substep's motion, subdivided, one substep
+    /// behind as a single deformable step per substep is.
+    pub fn body_pose_between(&self, id: u32, s: f64) -> Option<Isometry3<f64>> {
+        let now = self.body_pose(id)?;
+        let Some(start) = self.step_start.get(id as usize).filter(|_| s < 1.0) else {
+            return Some(now);
+        };
+        let s = s.max(0.0);
+        let translation = start.translation.vector.lerp(&now.translation.vector, s);
+        let rotation = start
+            .rotation
+            .try_slerp(&now.rotation, s, 1e-9)
+            .unwrap_or(now.rotation);
         Some(Isometry3::from_parts(
-            nalgebra::Translation3::from(origin),
-            turn * pose.rotation,
+            nalgebra::Translation3::from(translation),
+            rotation,
         ))
     }
 
@@ -324,6 +331,8 @@ impl RigidContext {
                 co.set_position(pos);
             }
         }
+        // Moved, not stepped: nothing to interpolate from.
+        self.step_start.clear();
         self.queries_stale = true;
     }
 
@@ -387,6 +396,14 @@ impl RigidContext {
                     }
                 }
             }
+        }
+        self.step_start.clear();
+        for (h, _) in &self.body_ids {
+            let pose = self
+                .bodies
+                .get(*h)
+                .map_or_else(Isometry3::identity, |b| pose_from_rapier(b.position()));
+            self.step_start.push(pose);
         }
         self.pipeline.step(
             vec_to_rapier(&self.gravity),
@@ -650,6 +667,7 @@ impl Stateful for RigidContext {
             ccd: self.ccd.clone(),
             soft_bodies: self.soft_bodies.clone(),
             pending: self.pending.clone(),
+            step_start: self.step_start.clone(),
         })
     }
 
@@ -666,6 +684,7 @@ impl Stateful for RigidContext {
             self.ccd = s.ccd;
             self.soft_bodies = s.soft_bodies;
             self.pending = s.pending;
+            self.step_start = s.step_start;
             // The pipeline holds only workspace, but a fresh one also drops memos tied to the
             // replaced sets.
             self.pipeline = PhysicsPipeline::new();
@@ -694,5 +713,11 @@ impl Stateful for RigidContext {
             }
         }
         h.write_u64(self.pending.len() as u64);
+        h.write_u64(self.step_start.len() as u64);
+        for p in &self.step_start {
+            for x in p.translation.vector.iter().chain(p.rotation.coords.iter()) {
+                h.write_f64(*x);
+            }
+        }
     }
 }

@@ -151,7 +151,7 @@ pub struct PhysicsDesc {
     /// deformable bodies (FEM, cloth) then step every `substeps / deformable_substeps` rigid
     /// substeps, over that much time, while the rigid world (robots) keeps its finer substeps.
     /// A multiple of `substeps`: they step `deformable_substeps / substeps` times per rigid
-    /// substep, each seeing the rigid bodies extrapolated at constant velocity to its start,
+    /// substep, grasps and attachments following the last rigid substep's motion subdivided,
     /// while the rigid world (robots) takes the coarser substeps.
     #[serde(default)]
     pub deformable_substeps: Option<u32>,
