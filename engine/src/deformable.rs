@@ -292,6 +292,8 @@ fn deformable_step<S: DeformableSolver>(
     for k in 0..inner {
         // Seconds after the rigid state: the deformable step's start within the substep.
         let t0 = f64::from(k) * dt;
+        // Where the bodies were at the end of this step: one rigid substep behind.
+        let s = f64::from(k + 1) / f64::from(inner);
         // Time at the start of this step: the physics step's start plus the substeps done in it.
         let time = clock.time + index as f64 * h + t0;
         for body in &mut ctx.bodies {
@@ -312,8 +314,6 @@ fn deformable_step<S: DeformableSolver>(
             }
             if let Some(r) = rigid.as_deref() {
                 let grippers = grippers.as_deref().map_or(&[][..], |g| &g.0);
-                // Where the bodies were at the end of this step, one rigid substep behind.
-                let s = f64::from(k + 1) / f64::from(inner);
                 if let Err(e) =
                     sync_grippers(&mut body.solver, grippers, &|id| r.body_pose_between(id, s))
                 {

@@ -47,6 +47,21 @@ pub fn pose_from_rapier(p: &Pose) -> Isometry3<f64> {
     )
 }
 
+/// The pose a fraction `t` of the way from `a` to `b`: translation linearly, rotation by slerp
+/// (`t >= 1` gives `b` exactly; for rotations half a turn apart, where slerp has no unique
+/// path, the nearer end).
+pub fn interpolate_pose(a: &Isometry3<f64>, b: &Isometry3<f64>, t: f64) -> Isometry3<f64> {
+    if t >= 1.0 {
+        return *b;
+    }
+    let tr = a.translation.vector.lerp(&b.translation.vector, t);
+    let rot = a
+        .rotation
+        .try_slerp(&b.rotation, t, 1e-12)
+        .unwrap_or(if t < 0.5 { a.rotation } else { b.rotation });
+    Isometry3::from_parts(Translation3::from(tr), rot)
+}
+
 /// Roll-pitch-yaw (extrinsic x, then y, then z; radians) -> rotation.
 pub fn rpy(roll: f64, pitch: f64, yaw: f64) -> UnitQuaternion<f64> {
     UnitQuaternion::from_euler_angles(roll, pitch, yaw)

@@ -20,7 +20,9 @@ use rapier3d::prelude::*;
 use crate::app::{PhysicsSystems, Plugin, SimErrors, SubstepSystems};
 use crate::components::{Pose, Velocity};
 use crate::coupling::{ContactQuery, PointContact, Reaction};
-use crate::math::{pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier};
+use crate::math::{
+    interpolate_pose, pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier,
+};
 use crate::scene::{MaterialDesc, RigidKind, RigidModel, RigidShape};
 use crate::state::{StateHasher, Stateful};
 use crate::SimApp;
@@ -256,26 +258,17 @@ impl RigidContext {
 
     /// Pose of a body id a fraction `s` (0..=1) of the way through the last rapier step: its
     /// pose at that step's start interpolated towards its current pose (translation linearly,
-    /// rotation by slerp); `s >= 1`, a body that did not exist then, or any body after
+    /// rotation by slerp, [`interpolate_pose`]); `s >= 1`, a body that did not exist then, or any body after
     /// [`RigidContext::bodies_moved`] gives [`RigidContext::body_pose`] exactly. What
     /// deformables stepping several times per rigid substep follow
     /// (`physics.deformable_substeps`): the last rigid substep's motion, subdivided, one substep
     /// behind as a single deformable step per substep is.
     pub fn body_pose_between(&self, id: u32, s: f64) -> Option<Isometry3<f64>> {
         let now = self.body_pose(id)?;
-        let Some(start) = self.step_start.get(id as usize).filter(|_| s < 1.0) else {
-            return Some(now);
-        };
-        let s = s.max(0.0);
-        let translation = start.translation.vector.lerp(&now.translation.vector, s);
-        let rotation = start
-            .rotation
-            .try_slerp(&now.rotation, s, 1e-9)
-            .unwrap_or(now.rotation);
-        Some(Isometry3::from_parts(
-            nalgebra::Translation3::from(translation),
-            rotation,
-        ))
+        Some(match self.step_start.get(id as usize) {
+            Some(start) => interpolate_pose(start, &now, s.max(0.0)),
+            None => now,
+        })
     }
 
     /// Appends the world positions (m) of the rigid contact points whose separation was at most

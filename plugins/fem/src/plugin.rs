@@ -76,9 +76,7 @@ impl DeformableSolver for FemSolid {
         query: &dyn ContactQuery,
         reactions: &mut Vec<Reaction>,
     ) -> Result<(), String> {
-        self.step(dt, *gravity, query, reactions)
-            .map(|_| ())
-            .map_err(|e| e.to_string())
+        self.step_coupled_at(0.0, dt, gravity, query, reactions)
     }
     fn step_coupled_at(
         &mut self,

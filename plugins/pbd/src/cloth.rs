@@ -26,6 +26,7 @@ use crate::lanes::{self, BendRow, DistRow, OnceRows, P4};
 use crate::material::{ClothMaterial, SolverSettings, TetherMetric};
 use crate::mesh;
 use crate::selfcollide::SelfCollision;
+use modesuite_engine::math::interpolate_pose;
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::collections::{BTreeMap, BinaryHeap};
 
@@ -289,18 +290,6 @@ fn finite3(v: &Vector3<f64>) -> bool {
 
 fn iso_finite(p: &Isometry3<f64>) -> bool {
     finite3(&p.translation.vector) && p.rotation.coords.iter().all(|c| c.is_finite())
-}
-
-fn interpolate(a: &Isometry3<f64>, b: &Isometry3<f64>, t: f64) -> Isometry3<f64> {
-    if t >= 1.0 {
-        return *b;
-    }
-    let tr = a.translation.vector.lerp(&b.translation.vector, t);
-    let rot = a
-        .rotation
-        .try_slerp(&b.rotation, t, 1e-12)
-        .unwrap_or(if t < 0.5 { a.rotation } else { b.rotation });
-    Isometry3::from_parts(Translation3::from(tr), rot)
 }
 
 impl Cloth {
@@ -1505,7 +1494,8 @@ impl Cloth {
             let frac = (s + 1) as f64 / ns as f64;
             self.frame_now.clear();
             for f in &self.frames {
-                self.frame_now.push(interpolate(&f.prev, &f.target, frac));
+                self.frame_now
+                    .push(interpolate_pose(&f.prev, &f.target, frac));
             }
             // velocities of the substep before (if any), then predict, in one pass
             lanes::advance(

@@ -63,8 +63,10 @@ pub struct RobotSpec {
     /// Physics substeps per 1/60 s step its controllers are validated at when it is alone
     /// (`physics.substeps` of its robot-only scenes and of `modesuite bench robots`): 1 for
     /// both (the robot and locomotion tests pass at 1/60 s).
-    /// Scenes with deformables may take more (4 where the FEM steps at 1/240 s; Spot then
-    /// walks with 4 sweeps, also validated).
+    /// Scenes may take more: the locomotion tests also validate Spot at 2 substeps with 8
+    /// sweeps and 4 with 4. Spot's task scenes keep 1 and give their FEM finer steps
+    /// (`physics.deformable_substeps`) or their cloth more cloth substeps, except Lift and
+    /// Cover (4 substeps, 1 sweep).
     pub substeps: u32,
 }
 
