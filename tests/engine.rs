@@ -323,6 +323,11 @@ fn bad_input_is_reported_with_object_field_and_value() {
     compile_text("Scene(physics: (substeps: 4, deformable_substeps: Some(8)))")
         .unwrap_or_else(|e| panic!("a multiple of substeps is valid: {e}"));
     expect_semantic(
+        "Scene(physics: (max_body_speed: -1.0))",
+        "physics.max_body_speed",
+        "above 0",
+    );
+    expect_semantic(
         "Scene(physics: (rigid_pgs_iterations: 0))",
         "physics.rigid_pgs_iterations",
         "1..=100",
@@ -395,6 +400,38 @@ fn physics_blow_up_ends_the_episode_with_a_reason_not_the_process() {
     let o = env.step(&[0.0]);
     assert!(o.info.error.is_none());
     assert!(o.observation.iter().all(|x| x.is_finite()));
+}
+
+#[test]
+fn a_body_faster_than_max_body_speed_ends_the_episode_naming_it() {
+    // Rapier flags only non-finite states; a body flung at finite, absurd speeds is caught by
+    // `physics.max_body_speed`. Here the limit is 2 m/s, which the falling box and ball pass
+    // together at t = 2 / 9.81 = 0.204 s (the 13th step of 1/60 s), before either lands.
+    let (mut desc, source) = scene::load_file(&drop_scene()).unwrap();
+    desc.physics.max_body_speed = 2.0;
+    let mut env = Env::new(poke_app_desc(&desc, &source, None));
+    env.reset(Some(0));
+    let mut ended = None;
+    for i in 1..=30 {
+        let o = env.step(&[0.0]);
+        if o.truncated {
+            ended = Some((i, o.info.error.clone(), o.reward));
+            break;
+        }
+    }
+    println!("max_body_speed 2 m/s: {ended:?} (expected at step 13)");
+    let (step, err, reward) = ended.expect("the episode ended");
+    assert_eq!(step, 13);
+    assert_eq!(reward, 0.0);
+    let err = err.expect("error");
+    assert!(err.contains("physics.max_body_speed = 2 m/s"), "{err}");
+    assert!(err.contains("\"box\"") || err.contains("\"ball\""), "{err}");
+    // The default (100 m/s) lets the same scene run to rest.
+    let mut env = Env::new(poke_app(&drop_scene(), None));
+    env.reset(Some(0));
+    for _ in 0..120 {
+        assert!(env.step(&[0.0]).info.error.is_none());
+    }
 }
 
 #[test]

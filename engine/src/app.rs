@@ -132,6 +132,9 @@ pub struct SimSettings {
     /// (`RigidContext::body_pose_between`), while colliders are extrapolated from
     /// `i * substep / deformable_inner` after the rigid state.
     pub deformable_inner: u32,
+    /// Linear speed (m/s) of a rigid body above which the rigid physics is reported as blown up
+    /// (the episode ends with an error naming the body).
+    pub max_body_speed: f64,
 }
 
 impl Default for SimSettings {
@@ -146,6 +149,7 @@ impl Default for SimSettings {
             rigid_friction_in_bias_pass: false,
             deformable_stride: 1,
             deformable_inner: 1,
+            max_body_speed: 100.0,
         }
     }
 }

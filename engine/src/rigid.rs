@@ -18,7 +18,7 @@ use parry3d::partitioning::{Bvh, BvhBuildStrategy};
 use rapier3d::prelude::*;
 
 use crate::app::{PhysicsSystems, Plugin, SimErrors, SubstepSystems};
-use crate::components::{Pose, Velocity};
+use crate::components::{Object, Pose, Velocity};
 use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::math::{
     interpolate_pose, pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier,
@@ -362,6 +362,20 @@ impl RigidContext {
         (Bvh::from_leaves(BvhBuildStrategy::Binned, &aabbs), leaves)
     }
 
+    /// The fastest dynamic body whose linear speed is above `max` (m/s), with its speed.
+    pub fn fastest_body_above(&self, max: f64) -> Option<(RigidBodyHandle, f64)> {
+        let max2 = (max * max) as f32;
+        self.bodies
+            .iter()
+            .filter(|(_, b)| b.linvel().length_squared() > max2)
+            .max_by(|a, b| {
+                a.1.linvel()
+                    .length_squared()
+                    .total_cmp(&b.1.linvel().length_squared())
+            })
+            .map(|(h, b)| (h, f64::from(b.linvel().length())))
+    }
+
     /// Advances the rigid world by `dt` seconds, applying pending reactions as forces.
     pub fn step(&mut self, dt: f64) -> Result<(), String> {
         self.params.dt = dt as f32;
@@ -631,9 +645,21 @@ fn rigid_step(
     mut ctx: ResMut<RigidContext>,
     settings: Res<crate::SimSettings>,
     mut errors: ResMut<SimErrors>,
+    names: Query<(&RigidRef, &Object)>,
 ) {
     if let Err(e) = ctx.step(settings.substep_dt()) {
         errors.raise(e);
+        return;
+    }
+    if let Some((h, speed)) = ctx.fastest_body_above(settings.max_body_speed) {
+        let name = names
+            .iter()
+            .find(|(r, _)| r.0 == h)
+            .map_or_else(|| format!("{h:?}"), |(_, o)| format!("\"{}\"", o.name));
+        errors.raise(format!(
+            "rigid physics blew up: body {name} moves at {speed:.3e} m/s, above physics.max_body_speed = {} m/s",
+            settings.max_body_speed
+        ));
     }
 }
 

@@ -155,6 +155,16 @@ pub struct PhysicsDesc {
     /// while the rigid world (robots) takes the coarser substeps.
     #[serde(default)]
     pub deformable_substeps: Option<u32>,
+    /// Linear speed (m/s) of any rigid body above which the rigid physics counts as blown up
+    /// and the episode ends with an error naming the body (default 100). Rapier only flags
+    /// non-finite states; a robot flung by diverging contact forces moves at finite, absurd
+    /// speeds (a Spot link at 10^9 m after 500 steps) and would otherwise keep scoring.
+    #[serde(default = "default_max_body_speed")]
+    pub max_body_speed: f64,
+}
+
+fn default_max_body_speed() -> f64 {
+    100.0
 }
 
 fn four() -> u32 {
@@ -172,6 +182,7 @@ impl Default for PhysicsDesc {
             rigid_pgs_iterations: 1,
             rigid_friction_in_bias_pass: false,
             deformable_substeps: None,
+            max_body_speed: default_max_body_speed(),
         }
     }
 }

@@ -301,6 +301,13 @@ fn validate_physics(p: &PhysicsDesc) -> Result<(), SceneError> {
             ));
         }
     }
+    if !(p.max_body_speed.is_finite() && p.max_body_speed > 0.0) {
+        return Err(SceneError::semantic(
+            "physics.max_body_speed",
+            p.max_body_speed.to_string(),
+            "a finite speed in m/s above 0 (default 100)",
+        ));
+    }
     for (field, value) in [
         ("physics.rigid_iterations", p.rigid_iterations),
         ("physics.rigid_pgs_iterations", p.rigid_pgs_iterations),
@@ -496,6 +503,7 @@ fn compile_inner(
             .physics
             .deformable_substeps
             .map_or(1, |d| (d / desc.physics.substeps).max(1)),
+        max_body_speed: desc.physics.max_body_speed,
     };
     if let Some(0) = desc.episode_steps {
         return Err(SceneError::semantic(
