@@ -40,6 +40,11 @@ enum Contacts {
 /// One contact penalty: node, unit normal, sticking (all three directions), penalty stiffness.
 pub(crate) type Penalty = (u32, Vector3<f64>, bool, f64);
 
+/// Columns `A^-1 u` solved with a base factor of `A`, each with its `u` (a node and a unit
+/// direction): handed on with the base to the next contact set's factor, which reuses those it
+/// needs again (a sticking contact's three axis columns do not depend on its normal).
+pub(crate) type Solved = Vec<((u32, Vector3<f64>), Vec<Vector3<f64>>)>;
+
 /// Factor of `A` plus the contact penalties (see the module docs).
 #[derive(Clone, Debug)]
 pub(crate) struct ContactFactor {
@@ -53,13 +58,13 @@ const SOLVES_PER_ROUND: f64 = 8.0;
 
 impl ContactFactor {
     /// Factors `a` (the block values of `A`; `diag[i]` is node `i`'s diagonal block) with the
-    /// `penalties`, reusing `base` (a factor of `A`) where given. `factor` factors block values;
+    /// `penalties`, reusing `base` (a factor of `A` and columns solved with it) where given. `factor` factors block values;
     /// `costs` are the flops of one factorisation and of one solve in this profile. Returns the
     /// factor and the number of factorisations done. `contacts_changed` says that `A` was
     /// factored before with other contacts: a base factor is then worth its cost even where this
     /// contact set alone would not repay it, as the next set will reuse it.
     pub(crate) fn new(
-        base: Option<ProfileCholesky>,
+        base: Option<(ProfileCholesky, Solved)>,
         contacts_changed: bool,
         a: &[Matrix3<f64>],
         diag: &[u32],
@@ -77,6 +82,10 @@ impl ContactFactor {
         if base.is_none() && !contacts_changed {
             low_rank_cost += factor_cost;
         }
+        let (base, mut solved) = match base {
+            Some((b, s)) => (Some(b), s),
+            None => (None, Vec::new()),
+        };
         let full = |base: Option<ProfileCholesky>| -> Result<(Self, usize), FemError> {
             let mut m = a.to_vec();
             for &(node, nrm, stick, k) in penalties {
@@ -122,6 +131,19 @@ impl ContactFactor {
         }
         let mut w = Vec::with_capacity(rank);
         for &(node, d) in &cols {
+            // the same column of the same factor: the same bits as solving it again
+            let same = |c: &((u32, Vector3<f64>), Vec<Vector3<f64>>)| {
+                c.0 .0 == node
+                    && c.0
+                         .1
+                        .iter()
+                        .zip(d.iter())
+                        .all(|(a, b)| a.to_bits() == b.to_bits())
+            };
+            if let Some(i) = solved.iter().position(same) {
+                w.push(solved.swap_remove(i).1);
+                continue;
+            }
             let mut e = vec![Vector3::zeros(); n];
             e[node as usize] = d;
             b.solve_in_place(&mut e);
@@ -151,9 +173,14 @@ impl ContactFactor {
         }
     }
 
-    /// The base factor, handed on to the next contact set's factor.
-    pub(crate) fn into_base(self) -> Option<ProfileCholesky> {
-        self.base
+    /// The base factor and the columns solved with it, handed on to the next contact set's
+    /// factor.
+    pub(crate) fn into_base(self) -> Option<(ProfileCholesky, Solved)> {
+        let solved = match self.contacts {
+            Contacts::LowRank { cols, w, .. } => cols.into_iter().zip(w).collect(),
+            Contacts::None | Contacts::Full(_) => Vec::new(),
+        };
+        self.base.map(|b| (b, solved))
     }
 
     /// Whether the contacts are a low-rank correction (tests).
@@ -231,6 +258,33 @@ mod tests {
         // the penalised directions are (nearly) held: the solution's component along them is
         // about 1/k of the rest
         assert!(x_low[21].amax() < 1e-5 * scale);
+        // a new contact set on the same matrix reuses the base factor and the columns it solved
+        // before (the sticking contact's axes whatever its normal): bitwise a fresh solve
+        let turned: Vec<Penalty> = vec![
+            (21, Vector3::new(0.0, 0.6, 0.8), true, 2.0 * k),
+            (30, Vector3::x(), false, k),
+        ];
+        let (mut reused, n) = ContactFactor::new(
+            low.clone().into_base(),
+            true,
+            &a,
+            &pat.diag,
+            &turned,
+            (1e12, 1.0),
+            factor,
+        )
+        .unwrap();
+        let (mut fresh, _) =
+            ContactFactor::new(None, true, &a, &pat.diag, &turned, (1e12, 1.0), factor).unwrap();
+        assert!(reused.is_low_rank() && fresh.is_low_rank());
+        assert_eq!(n, 0);
+        let (mut x_reused, mut x_fresh) = (x_low.clone(), x_low.clone());
+        reused.solve_in_place(&mut x_reused);
+        fresh.solve_in_place(&mut x_fresh);
+        assert!(x_reused.iter().zip(&x_fresh).all(|(a, b)| a
+            .iter()
+            .zip(b.iter())
+            .all(|(p, q)| p.to_bits() == q.to_bits())));
         // a new contact set on the same matrix reuses the base factor: no factorisation
         let base = low.into_base();
         let (again, n) = ContactFactor::new(

@@ -60,7 +60,7 @@ use crate::element::{shape_values, NQ};
 use crate::error::FemError;
 use crate::material::Material;
 use crate::model::{KernelStats, SolidModel};
-use crate::precond::{ContactFactor, Penalty};
+use crate::precond::{ContactFactor, Penalty, Solved};
 use crate::sparse::{dot, pcg, ProfileCholesky};
 use crate::warp::Warp;
 use nalgebra::{Isometry3, Matrix3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
@@ -1241,12 +1241,13 @@ impl FemSolid {
 
     /// Factors the system matrix `vals` with the contacts' stiff penalties (`1e6` times the norm
     /// of the node's diagonal block, along the normal; all three directions when sticking),
-    /// reusing `base`, a factor of `vals` from an earlier contact set, when given;
+    /// reusing `base`, a factor of `vals` from an earlier contact set and the columns solved
+    /// with it, when given;
     /// `contacts_changed`: `vals` was factored before with other contacts (see
     /// [`ContactFactor::new`]).
     fn contact_factor(
         &self,
-        base: Option<ProfileCholesky>,
+        base: Option<(ProfileCholesky, Solved)>,
         contacts_changed: bool,
         vals: &[Matrix3<f64>],
         contacts: &[(u32, Vector3<f64>, bool)],
