@@ -379,21 +379,24 @@ fn non_finite_action_never_reaches_the_solver_and_ends_the_episode() {
     assert!(o.info.error.unwrap().contains("length 2"));
 }
 
+/// Steps the zero action until an episode is truncated (at most `max` steps): the step's
+/// number (from 1), its error and its reward.
+fn step_until_truncated(env: &mut Env, max: u64) -> Option<(u64, Option<String>, f64)> {
+    (1..=max).find_map(|i| {
+        let o = env.step(&[0.0]);
+        o.truncated.then(|| (i, o.info.error.clone(), o.reward))
+    })
+}
+
 #[test]
 fn physics_blow_up_ends_the_episode_with_a_reason_not_the_process() {
     let mut env = Env::new(poke_app(&drop_scene(), Some(3)));
     env.reset(Some(0));
-    let mut ended = None;
-    for i in 0..10 {
-        let o = env.step(&[0.0]);
-        if o.truncated {
-            ended = Some((i, o.info.error.clone(), o.reward));
-            break;
-        }
-    }
+    let ended = step_until_truncated(&mut env, 10);
     println!("blow-up: {ended:?}");
     let (step, err, reward) = ended.expect("the episode ended");
-    assert_eq!(step, 3);
+    // poisoned once 3 env steps have run: the 4th fails
+    assert_eq!(step, 4);
     assert_eq!(reward, 0.0, "a failed step's reward is 0");
     assert!(err.expect("error").contains("non-finite"));
     // The env goes on after the autoreset.
@@ -411,14 +414,7 @@ fn a_body_faster_than_max_body_speed_ends_the_episode_naming_it() {
     desc.physics.max_body_speed = 2.0;
     let mut env = Env::new(poke_app_desc(&desc, &source, None));
     env.reset(Some(0));
-    let mut ended = None;
-    for i in 1..=30 {
-        let o = env.step(&[0.0]);
-        if o.truncated {
-            ended = Some((i, o.info.error.clone(), o.reward));
-            break;
-        }
-    }
+    let ended = step_until_truncated(&mut env, 30);
     println!("max_body_speed 2 m/s: {ended:?} (expected at step 13)");
     let (step, err, reward) = ended.expect("the episode ended");
     assert_eq!(step, 13);
