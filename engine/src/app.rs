@@ -137,6 +137,9 @@ pub struct SimSettings {
     pub max_body_speed: f64,
 }
 
+/// Default of [`SimSettings::max_body_speed`] and the scene's `physics.max_body_speed`, m/s.
+pub const DEFAULT_MAX_BODY_SPEED: f64 = 100.0;
+
 impl Default for SimSettings {
     fn default() -> Self {
         Self {
@@ -149,7 +152,7 @@ impl Default for SimSettings {
             rigid_friction_in_bias_pass: false,
             deformable_stride: 1,
             deformable_inner: 1,
-            max_body_speed: 100.0,
+            max_body_speed: DEFAULT_MAX_BODY_SPEED,
         }
     }
 }

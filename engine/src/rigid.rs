@@ -362,18 +362,15 @@ impl RigidContext {
         (Bvh::from_leaves(BvhBuildStrategy::Binned, &aabbs), leaves)
     }
 
-    /// The fastest dynamic body whose linear speed is above `max` (m/s), with its speed.
+    /// The fastest body whose linear speed is above `max` (m/s), with its speed.
     pub fn fastest_body_above(&self, max: f64) -> Option<(RigidBodyHandle, f64)> {
         let max2 = (max * max) as f32;
         self.bodies
             .iter()
-            .filter(|(_, b)| b.linvel().length_squared() > max2)
-            .max_by(|a, b| {
-                a.1.linvel()
-                    .length_squared()
-                    .total_cmp(&b.1.linvel().length_squared())
-            })
-            .map(|(h, b)| (h, f64::from(b.linvel().length())))
+            .map(|(h, b)| (h, b.linvel().length_squared()))
+            .filter(|&(_, v2)| v2 > max2)
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(h, v2)| (h, f64::from(v2.sqrt())))
     }
 
     /// Advances the rigid world by `dt` seconds, applying pending reactions as forces.

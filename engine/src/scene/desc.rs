@@ -164,7 +164,7 @@ pub struct PhysicsDesc {
 }
 
 fn default_max_body_speed() -> f64 {
-    100.0
+    crate::app::DEFAULT_MAX_BODY_SPEED
 }
 
 fn four() -> u32 {

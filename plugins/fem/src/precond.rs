@@ -131,12 +131,11 @@ impl ContactFactor {
         }
         let mut w = Vec::with_capacity(rank);
         for &(node, d) in &cols {
-            // the same column of the same factor: the same bits as solving it again
-            let same = |c: &((u32, Vector3<f64>), Vec<Vector3<f64>>)| {
-                c.0 .0 == node
-                    && c.0
-                         .1
-                        .iter()
+            // the same column of the same factor (direction compared bit by bit): the same
+            // bits as solving it again
+            let same = |((m, u), _): &((u32, Vector3<f64>), Vec<Vector3<f64>>)| {
+                *m == node
+                    && u.iter()
                         .zip(d.iter())
                         .all(|(a, b)| a.to_bits() == b.to_bits())
             };

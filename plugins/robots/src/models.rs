@@ -65,8 +65,8 @@ pub struct RobotSpec {
     /// both (the robot and locomotion tests pass at 1/60 s).
     /// Scenes may take more: the locomotion tests also validate Spot at 2 substeps with 8
     /// sweeps and 4 with 4. Spot's task scenes keep 1 and give their FEM finer steps
-    /// (`physics.deformable_substeps`) or their cloth more cloth substeps, except Lift and
-    /// Cover (4 substeps, 1 sweep).
+    /// (`physics.deformable_substeps`) or their cloth more cloth substeps, except Cover (4
+    /// substeps, 1 sweep).
     pub substeps: u32,
 }
 
