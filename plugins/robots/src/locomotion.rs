@@ -298,7 +298,7 @@ pub struct TrotParams {
     /// (`kp h` over a rigid step `h`) as well as for `kd` (default true; see
     /// [`TrotController::write`]). Without it, Spot at 1/120 s substeps side-steps 17 % slow
     /// and drifts off its circles. `false` keeps the lead of the scenes tuned before it (Spot
-    /// Lift and Cover, whose experts fail with it).
+    /// Cover, whose expert fails with it).
     pub implicit_damping_lead: bool,
 }
 
