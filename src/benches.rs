@@ -246,14 +246,19 @@ pub const TASK_ROUNDS: usize = 4;
 /// env with its state observation and the zero action, `ID` (1 env, 1 thread) and `ID_x16` (16
 /// envs stepped by a `VecEnv`, one thread and all threads). Extra keys: `task`, `single_runs`
 /// (the single-env rate in each round), `overhead` (x16 on one thread: per-env time over the
-/// single env's, minus 1; 0.10 = 10 % slower per env) and `overhead_rounds` (the same per round).
+/// single env's, minus 1; 0.10 = 10 % slower per env), `overhead_rounds` (the same per round),
+/// and its two parts: `turns_overhead` (16 envs stepped in turn by a plain loop over the single
+/// env's: the cost of 16 worlds' state sharing the caches, which one world alone keeps warm) and
+/// `path_overhead` (the one-thread `VecEnv` over that loop: the cost of the vectorised path
+/// itself).
 ///
-/// Both sides do the same work: 16 envs reset with the same seed, each stepped through the same
-/// window of the episode. The single-env side steps them one after another (each env alone for
-/// the window, as a single env runs), the x16 side in lock step through a one-thread `VecEnv`.
-/// The window is cut into [`TASK_ROUNDS`] rounds and the two sides take turns, so both see the
-/// same machine: a shared VM's speed drifts 5-15 % within a minute. `steps_per_s` and `overhead`
-/// come from the summed times.
+/// All sides do the same work: 16 envs, env `i` reset with seed `i` (as a `VecEnv` seeds them),
+/// each stepped through the same window of the episode. The single-env side steps them one after
+/// another (each env alone for the window, as a single env runs), the loop side steps the 16 in
+/// turn, one step each, and the x16 side in lock step through a one-thread `VecEnv`. The window
+/// is cut into [`TASK_ROUNDS`] rounds and the sides take turns, so all see the same machine: a
+/// shared VM's speed drifts 5-15 % within a minute. `steps_per_s` and the overheads come from
+/// the summed times.
 pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
     for id in modesuite_tasks::IMPLEMENTED {
@@ -261,8 +266,8 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         let make = || -> Result<Vec<modesuite_engine::Env>, String> {
             let mut envs =
                 crate::cli::envs_for_target(id, None, 16).map_err(|e| format!("{id}: {e}"))?;
-            for e in &mut envs {
-                e.reset(Some(0));
+            for (i, e) in envs.iter_mut().enumerate() {
+                e.reset(Some(i as u64));
             }
             Ok(envs)
         };
@@ -282,23 +287,35 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         // steps per round (at least one: `--scale 0.01`, the CLI test, runs 4 per env)
         let w = ((300.0 * opts.scale / TASK_ROUNDS as f64) as usize).max(1);
         let n = w * TASK_ROUNDS;
+        let mut by_hand = make()?;
         let mut venv = x16_envs(1)?;
+        let step = |env: &mut modesuite_engine::Env| match env.step(&zero).info.error {
+            Some(e) => Err(format!("{id}: {e}")),
+            None => Ok(()),
+        };
+        // per round: (each env alone, the 16 stepped in turn by hand, the `VecEnv`) seconds
         let mut rounds = Vec::with_capacity(TASK_ROUNDS);
         for _ in 0..TASK_ROUNDS {
             let t = Instant::now();
             for env in &mut singles {
                 for _ in 0..w {
-                    if let Some(e) = env.step(&zero).info.error {
-                        return Err(format!("{id}: {e}"));
-                    }
+                    step(env)?;
                 }
             }
             let t1 = t.elapsed().as_secs_f64();
-            rounds.push((t1, time_x16(&mut venv, w)?));
+            let t = Instant::now();
+            for _ in 0..w {
+                for env in &mut by_hand {
+                    step(env)?;
+                }
+            }
+            let t_turns = t.elapsed().as_secs_f64();
+            rounds.push((t1, t_turns, time_x16(&mut venv, w)?));
         }
-        drop((venv, singles));
+        drop((venv, singles, by_hand));
         let t1: f64 = rounds.iter().map(|r| r.0).sum();
-        let t16: f64 = rounds.iter().map(|r| r.1).sum();
+        let t_turns: f64 = rounds.iter().map(|r| r.1).sum();
+        let t16: f64 = rounds.iter().map(|r| r.2).sum();
         let mut x16 = vec![(1, (16 * n) as f64 / t16, Some(t16 / t1 - 1.0))];
         for threads in thread_counts(opts)?.into_iter().filter(|&t| t != 1) {
             let mut venv = x16_envs(threads)?;
@@ -321,8 +338,10 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
                 extra.insert("overhead".into(), json!(o));
                 extra.insert(
                     "overhead_rounds".into(),
-                    json!(rounds.iter().map(|r| r.1 / r.0 - 1.0).collect::<Vec<_>>()),
+                    json!(rounds.iter().map(|r| r.2 / r.0 - 1.0).collect::<Vec<_>>()),
                 );
+                extra.insert("turns_overhead".into(), json!(t_turns / t1 - 1.0));
+                extra.insert("path_overhead".into(), json!(t16 / t_turns - 1.0));
             }
             out.push(BenchRecord::new(
                 &format!("{id}_x16"),
