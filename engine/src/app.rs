@@ -584,13 +584,13 @@ impl SimApp {
     pub fn step(&mut self) {
         *self.world.resource_mut::<Phase>() = Phase::Step;
         self.world.resource_mut::<SimErrors>().current.clear();
-        self.world.run_schedule(EnvStep);
+        crate::simd::flush_denormals(|| self.world.run_schedule(EnvStep));
     }
 
     /// Runs the reset pass of [`EnvStep`] (reset events, sensing, observation).
     pub fn run_reset_pass(&mut self) {
         *self.world.resource_mut::<Phase>() = Phase::Reset;
-        self.world.run_schedule(EnvStep);
+        crate::simd::flush_denormals(|| self.world.run_schedule(EnvStep));
         *self.world.resource_mut::<Phase>() = Phase::Step;
     }
 

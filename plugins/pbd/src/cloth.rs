@@ -22,13 +22,14 @@
 
 use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::error::PbdError;
-use crate::lanes::{self, BendRow, DistRow, OnceRows, P4};
+use crate::lanes::{self, BendRow, DistRow, OnceRows, RowCache, SolverRows, P4};
 use crate::material::{ClothMaterial, SolverSettings, TetherMetric};
 use crate::mesh;
 use crate::selfcollide::SelfCollision;
 use modesuite_engine::math::interpolate_pose;
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use std::collections::{BTreeMap, BinaryHeap};
+use std::sync::Arc;
 
 /// An explicit distance constraint for [`Cloth::from_distance_constraints`] (ropes, chains).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -195,10 +196,11 @@ pub struct Cloth {
     dist_rest: Vec<f64>,
     dist_alpha: Vec<f64>,
     dist_lambda: Vec<f64>,
-    /// `(d)` packed solver rows derived from the above for the substep length `cache_h`, and
-    /// the same rows in batches of four per colour for the first iteration.
-    dist_rows: Vec<DistRow>,
-    dist_once: OnceRows,
+    /// Packed solver rows (distances, the same in batches of four per colour for the first
+    /// iteration, bending) derived from these constraints for the substep length `cache_h`;
+    /// shared through `row_cache` with the other cloths of the same compiled object.
+    rows: Arc<SolverRows>,
+    row_cache: Arc<RowCache>,
     /// End index of each colour in the distance arrays (constraints of one colour share no
     /// particle, so they are processed four at a time).
     dist_colour_end: Vec<usize>,
@@ -210,8 +212,6 @@ pub struct Cloth {
     bend_k: Vec<[f64; 4]>,
     bend_alpha: Vec<f64>,
     bend_lambda: Vec<P4>,
-    /// `(b)` packed solver rows derived from the above for the substep length `cache_h`.
-    bend_rows: Vec<BendRow>,
     /// Substep length the caches were computed for, s (NaN: stale).
     cache_h: f64,
 
@@ -485,8 +485,8 @@ impl Cloth {
             edge: Vec::new(),
             edge_rest: Vec::new(),
             dist_lambda: vec![0.0; dist_idx.len()],
-            dist_rows: Vec::new(),
-            dist_once: OnceRows::default(),
+            rows: Arc::default(),
+            row_cache: Arc::default(),
             dist_colour_end,
             dist_idx,
             dist_rest,
@@ -495,7 +495,6 @@ impl Cloth {
             bend_k: border.iter().map(|&k| bends[k].1).collect(),
             bend_alpha: border.iter().map(|&k| bends[k].2).collect(),
             bend_lambda: vec![P4::ZERO; bends.len()],
-            bend_rows: Vec::new(),
             cache_h: f64::NAN,
             tether_rows: Vec::new(),
             grasp_tether_rows: Vec::new(),
@@ -1012,6 +1011,20 @@ impl Cloth {
         self.avx2
     }
 
+    /// Shares this cloth's solver rows with the other cloths that use `cache` (the envs of one
+    /// compiled object): where their rows are bitwise equal they read one copy. Results do not
+    /// change (the rows are a pure function of the cloth's data).
+    pub(crate) fn share_rows(&mut self, cache: Arc<RowCache>) {
+        self.row_cache = cache;
+        self.cache_h = f64::NAN;
+    }
+
+    /// Whether this cloth reads the same solver rows as `other` (tests).
+    #[cfg(test)]
+    pub(crate) fn shares_rows_with(&self, other: &Cloth) -> bool {
+        Arc::ptr_eq(&self.rows, &other.rows)
+    }
+
     /// Recomputes the packed per-constraint rows for substep length `h` if stale.
     fn refresh_caches(&mut self, h: f64) {
         if self.cache_h == h {
@@ -1019,14 +1032,14 @@ impl Cloth {
         }
         let inv_h2 = 1.0 / (h * h);
         let w = &self.inv_mass;
-        self.dist_rows.clear();
+        let mut dist = Vec::with_capacity(self.dist_idx.len());
         for k in 0..self.dist_idx.len() {
             let [a, b] = self.dist_idx[k];
             let at = self.dist_alpha[k] * inv_h2;
             let (wa, wb) = (w[a as usize], w[b as usize]);
             let den = wa + wb + at;
             let inv_denom = if den > 0.0 { 1.0 / den } else { 0.0 };
-            self.dist_rows.push(DistRow {
+            dist.push(DistRow {
                 a,
                 b,
                 rest: self.dist_rest[k],
@@ -1036,7 +1049,7 @@ impl Cloth {
                 kb: wb * inv_denom,
             });
         }
-        self.bend_rows.clear();
+        let mut bend = Vec::with_capacity(self.bend_idx.len());
         for b in 0..self.bend_idx.len() {
             let ids = self.bend_idx[b];
             let k = self.bend_k[b];
@@ -1047,7 +1060,7 @@ impl Cloth {
             }
             let inv_denom = if den > 0.0 { 1.0 / den } else { 0.0 };
             let wk = [0, 1, 2, 3].map(|j| w[ids[j] as usize] * k[j] * inv_denom);
-            self.bend_rows.push(BendRow {
+            bend.push(BendRow {
                 ids,
                 k,
                 wk,
@@ -1055,7 +1068,8 @@ impl Cloth {
                 inv_denom,
             });
         }
-        self.dist_once = OnceRows::build(&self.dist_rows, &self.dist_colour_end);
+        let once = OnceRows::build(&dist, &self.dist_colour_end);
+        self.rows = self.row_cache.share(SolverRows { dist, once, bend });
         self.cache_h = h;
     }
 
@@ -1536,11 +1550,11 @@ impl Cloth {
             for _ in 0..self.settings.iterations {
                 if self.settings.iterations == 1 {
                     // multipliers start at zero and are not needed afterwards
-                    lanes::distances_once(self.avx2, &mut self.x, &self.dist_once);
-                    lanes::bending_once(self.avx2, &mut self.x, &self.bend_rows);
+                    lanes::distances_once(self.avx2, &mut self.x, &self.rows.once);
+                    lanes::bending_once(self.avx2, &mut self.x, &self.rows.bend);
                 } else {
-                    solve_distances(&mut self.x, &self.dist_rows, &mut self.dist_lambda);
-                    solve_bending(&mut self.x, &self.bend_rows, &mut self.bend_lambda);
+                    solve_distances(&mut self.x, &self.rows.dist, &mut self.dist_lambda);
+                    solve_bending(&mut self.x, &self.rows.bend, &mut self.bend_lambda);
                 }
                 self.solve_attachments(att_alpha, h);
                 self.solve_tethers();

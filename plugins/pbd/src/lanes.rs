@@ -16,6 +16,7 @@
 
 use nalgebra::Vector3;
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
+use std::sync::{Arc, Mutex, PoisonError};
 
 /// A point or vector of the working layout: `[x, y, z, 0]`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -195,6 +196,104 @@ impl OnceRows {
             start = end;
         }
         out
+    }
+}
+
+/// The solver rows of one substep length and one set of inverse masses: immutable once built,
+/// and shared (behind an `Arc`, see [`RowCache`]) by the cloths of one compiled object whose rows
+/// are bitwise the same.
+#[derive(Debug, Default)]
+pub(crate) struct SolverRows {
+    /// Distance rows, colour-sorted (the multi-iteration solver).
+    pub dist: Vec<DistRow>,
+    /// The same in batches of four per colour (the one-iteration kernels).
+    pub once: OnceRows,
+    /// Bending rows, colour-sorted.
+    pub bend: Vec<BendRow>,
+}
+
+/// Whether two float slices hold the same bits.
+fn same_f64(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+impl SolverRows {
+    /// Whether `self` and `o` hold the same bits.
+    fn same_bits(&self, o: &SolverRows) -> bool {
+        let dist = |r: &DistRow| [r.rest, r.at, r.inv_denom, r.ka, r.kb];
+        let bend = |r: &BendRow| {
+            let mut v = [0.0; 10];
+            v[..4].copy_from_slice(&r.k);
+            v[4..8].copy_from_slice(&r.wk);
+            v[8] = r.at;
+            v[9] = r.inv_denom;
+            v
+        };
+        let batch = |r: &DistBatch| {
+            let mut v = [0.0; 12];
+            v[..4].copy_from_slice(&r.rest);
+            v[4..8].copy_from_slice(&r.ka);
+            v[8..].copy_from_slice(&r.kb);
+            v
+        };
+        self.dist.len() == o.dist.len()
+            && self.bend.len() == o.bend.len()
+            && self.once.batches.len() == o.once.batches.len()
+            && self.once.tail.len() == o.once.tail.len()
+            && self.once.colour_end == o.once.colour_end
+            && self
+                .dist
+                .iter()
+                .zip(&o.dist)
+                .all(|(a, b)| (a.a, a.b) == (b.a, b.b) && same_f64(&dist(a), &dist(b)))
+            && self
+                .once
+                .tail
+                .iter()
+                .zip(&o.once.tail)
+                .all(|(a, b)| (a.a, a.b) == (b.a, b.b) && same_f64(&dist(a), &dist(b)))
+            && self
+                .bend
+                .iter()
+                .zip(&o.bend)
+                .all(|(a, b)| a.ids == b.ids && same_f64(&bend(a), &bend(b)))
+            && self
+                .once
+                .batches
+                .iter()
+                .zip(&o.once.batches)
+                .all(|(a, b)| (a.a, a.b) == (b.a, b.b) && same_f64(&batch(a), &batch(b)))
+    }
+}
+
+/// Most row sets a [`RowCache`] keeps (sets no cloth holds are dropped first).
+const CACHED_ROWS: usize = 8;
+
+/// Solver rows shared by the cloths of one compiled object (the envs of a vectorised env): the
+/// rows are a pure function of the mesh, material, substep length and inverse masses, so a cloth
+/// whose rows come out bitwise equal to a cached set takes that set and drops its own. 16 envs
+/// of a cloth task then read one copy of their largest per-step data instead of 16, which
+/// otherwise fall out of the caches between their steps (BENCHMARKS.md, Tasks).
+#[derive(Debug, Default)]
+pub(crate) struct RowCache {
+    entries: Mutex<Vec<Arc<SolverRows>>>,
+}
+
+impl RowCache {
+    /// The cached set bitwise equal to `rows`, or `rows` itself (kept while there is room).
+    pub(crate) fn share(&self, rows: SolverRows) -> Arc<SolverRows> {
+        let mut entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(e) = entries.iter().find(|e| e.same_bits(&rows)) {
+            return Arc::clone(e);
+        }
+        let rows = Arc::new(rows);
+        if entries.len() >= CACHED_ROWS {
+            entries.retain(|e| Arc::strong_count(e) > 1);
+        }
+        if entries.len() < CACHED_ROWS {
+            entries.push(Arc::clone(&rows));
+        }
+        rows
     }
 }
 

@@ -32,6 +32,7 @@ use modesuite_engine::{DeformableSystems, Plugin, SimApp};
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::Deserialize;
 
+use crate::lanes::RowCache;
 use crate::{Cloth, ClothMaterial, OrientedBox, SolverSettings};
 
 /// The RON parameters of a `pbd.cloth` object.
@@ -132,6 +133,8 @@ pub struct CompiledCloth {
     pub initial: Option<Vec<Vector3<f64>>>,
     /// Driven particle sets: particles, velocity m/s, start s, stop s.
     pub drags: Vec<(Vec<u32>, Vector3<f64>, f64, f64)>,
+    /// Solver rows shared by the envs' cloths (a cache).
+    rows: Arc<RowCache>,
 }
 
 /// Every cloth of one env (part of the env state).
@@ -336,6 +339,7 @@ impl BodyKind for ClothKind {
             groups,
             initial,
             drags,
+            rows: Arc::default(),
         };
         // Build once here so that every construction error is a compile error, not a spawn error.
         build_cloth(&compiled).map_err(|e| SceneError::semantic(path, "(cloth)", e.to_string()))?;
@@ -365,6 +369,7 @@ impl BodyKind for ClothKind {
 /// The cloth of a compiled object: rest shape, initial (folded) positions, pins, groups, drags.
 fn build_cloth(c: &CompiledCloth) -> Result<Cloth, crate::PbdError> {
     let mut cloth = Cloth::new(&c.positions, &c.triangles, c.material, c.settings)?;
+    cloth.share_rows(Arc::clone(&c.rows));
     if let Some(initial) = &c.initial {
         cloth.set_positions(initial)?;
     }
