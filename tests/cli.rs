@@ -286,6 +286,15 @@ fn bench_suites_json_have_their_keys() {
             assert!(x16["overhead"].as_f64().is_some_and(|o| o > -1.0));
             let per_round = numbers(x16, "overhead_rounds", modesuite::benches::TASK_ROUNDS);
             assert!(per_round.iter().all(|&o| o > -1.0));
+            // the overhead splits into the plain loop's (caches) and the VecEnv's over it (path)
+            let part = |k: &str| x16[k].as_f64().unwrap_or_else(|| panic!("{k} in {x16}"));
+            let (turns, path) = (part("turns_overhead"), part("path_overhead"));
+            let whole = x16["overhead"].as_f64().unwrap();
+            assert!(turns > -1.0 && path > -1.0);
+            assert!(
+                ((1.0 + turns) * (1.0 + path) - (1.0 + whole)).abs() < 1e-9,
+                "turns {turns} and path {path} do not compose to the overhead {whole}"
+            );
         }
     }
 }
