@@ -212,9 +212,14 @@ pub(crate) struct SolverRows {
     pub bend: Vec<BendRow>,
 }
 
+/// Whether `a` and `b` have the same length and `eq` holds for each pair.
+fn all_same<T>(a: &[T], b: &[T], eq: impl Fn(&T, &T) -> bool) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| eq(x, y))
+}
+
 /// Whether two float slices hold the same bits.
 fn same_f64(a: &[f64], b: &[f64]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+    all_same(a, b, |x, y| x.to_bits() == y.to_bits())
 }
 
 impl SolverRows {
@@ -236,33 +241,17 @@ impl SolverRows {
             v[8..].copy_from_slice(&r.kb);
             v
         };
-        self.dist.len() == o.dist.len()
-            && self.bend.len() == o.bend.len()
-            && self.once.batches.len() == o.once.batches.len()
-            && self.once.tail.len() == o.once.tail.len()
+        let dist_eq =
+            |a: &DistRow, b: &DistRow| (a.a, a.b) == (b.a, b.b) && same_f64(&dist(a), &dist(b));
+        all_same(&self.dist, &o.dist, dist_eq)
+            && all_same(&self.once.tail, &o.once.tail, dist_eq)
             && self.once.colour_end == o.once.colour_end
-            && self
-                .dist
-                .iter()
-                .zip(&o.dist)
-                .all(|(a, b)| (a.a, a.b) == (b.a, b.b) && same_f64(&dist(a), &dist(b)))
-            && self
-                .once
-                .tail
-                .iter()
-                .zip(&o.once.tail)
-                .all(|(a, b)| (a.a, a.b) == (b.a, b.b) && same_f64(&dist(a), &dist(b)))
-            && self
-                .bend
-                .iter()
-                .zip(&o.bend)
-                .all(|(a, b)| a.ids == b.ids && same_f64(&bend(a), &bend(b)))
-            && self
-                .once
-                .batches
-                .iter()
-                .zip(&o.once.batches)
-                .all(|(a, b)| (a.a, a.b) == (b.a, b.b) && same_f64(&batch(a), &batch(b)))
+            && all_same(&self.bend, &o.bend, |a, b| {
+                a.ids == b.ids && same_f64(&bend(a), &bend(b))
+            })
+            && all_same(&self.once.batches, &o.once.batches, |a, b| {
+                (a.a, a.b) == (b.a, b.b) && same_f64(&batch(a), &batch(b))
+            })
     }
 }
 
