@@ -584,13 +584,18 @@ impl SimApp {
     pub fn step(&mut self) {
         *self.world.resource_mut::<Phase>() = Phase::Step;
         self.world.resource_mut::<SimErrors>().current.clear();
+        self.run_env_step();
+    }
+
+    /// One pass of [`EnvStep`] with subnormals flushed (`simd::flush_denormals`).
+    fn run_env_step(&mut self) {
         crate::simd::flush_denormals(|| self.world.run_schedule(EnvStep));
     }
 
     /// Runs the reset pass of [`EnvStep`] (reset events, sensing, observation).
     pub fn run_reset_pass(&mut self) {
         *self.world.resource_mut::<Phase>() = Phase::Reset;
-        crate::simd::flush_denormals(|| self.world.run_schedule(EnvStep));
+        self.run_env_step();
         *self.world.resource_mut::<Phase>() = Phase::Step;
     }
 

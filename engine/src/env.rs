@@ -423,11 +423,16 @@ impl VecEnv {
         if let Some(i) = envs.iter().position(|e| e.spaces() != spaces) {
             return Err(VecEnvError::SpaceMismatch(i));
         }
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .map_err(|e| VecEnvError::ThreadPool(e.to_string()))?;
-        let pool = (pool.current_num_threads() > 1).then_some(pool);
+        let pool = if threads == 1 {
+            None
+        } else {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .map_err(|e| VecEnvError::ThreadPool(e.to_string()))?;
+            // `threads = 0` on a one-core machine
+            (pool.current_num_threads() > 1).then_some(pool)
+        };
         Ok(Self {
             envs,
             pool,

@@ -79,25 +79,17 @@ macro_rules! avx2_dispatch {
 #[inline]
 pub fn flush_denormals<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
+    #[allow(deprecated)] // the MXCSR intrinsics have no replacement outside inline assembly
     {
-        #[allow(deprecated)]
         use std::arch::x86_64::{_mm_getcsr, _mm_setcsr};
         // flush-to-zero (bit 15) and denormals-are-zero (bit 6)
         const FTZ_DAZ: u32 = (1 << 15) | (1 << 6);
-        #[allow(deprecated)]
-        // SAFETY: SSE is part of the x86-64 baseline; only the two flush bits change.
+        // SAFETY: SSE is part of the x86-64 baseline; only the two flush bits change, and the
+        // caller's value is put back.
         let old = unsafe { _mm_getcsr() };
-        #[allow(deprecated)]
-        // SAFETY: as above.
-        unsafe {
-            _mm_setcsr(old | FTZ_DAZ)
-        };
+        unsafe { _mm_setcsr(old | FTZ_DAZ) };
         let out = f();
-        #[allow(deprecated)]
-        // SAFETY: restores the caller's register.
-        unsafe {
-            _mm_setcsr(old)
-        };
+        unsafe { _mm_setcsr(old) };
         out
     }
     #[cfg(not(target_arch = "x86_64"))]

@@ -225,32 +225,27 @@ fn same_f64(a: &[f64], b: &[f64]) -> bool {
 impl SolverRows {
     /// Whether `self` and `o` hold the same bits.
     fn same_bits(&self, o: &SolverRows) -> bool {
-        let dist = |r: &DistRow| [r.rest, r.at, r.inv_denom, r.ka, r.kb];
-        let bend = |r: &BendRow| {
-            let mut v = [0.0; 10];
-            v[..4].copy_from_slice(&r.k);
-            v[4..8].copy_from_slice(&r.wk);
-            v[8] = r.at;
-            v[9] = r.inv_denom;
-            v
+        let dist_eq = |a: &DistRow, b: &DistRow| {
+            (a.a, a.b) == (b.a, b.b)
+                && same_f64(
+                    &[a.rest, a.at, a.inv_denom, a.ka, a.kb],
+                    &[b.rest, b.at, b.inv_denom, b.ka, b.kb],
+                )
         };
-        let batch = |r: &DistBatch| {
-            let mut v = [0.0; 12];
-            v[..4].copy_from_slice(&r.rest);
-            v[4..8].copy_from_slice(&r.ka);
-            v[8..].copy_from_slice(&r.kb);
-            v
-        };
-        let dist_eq =
-            |a: &DistRow, b: &DistRow| (a.a, a.b) == (b.a, b.b) && same_f64(&dist(a), &dist(b));
         all_same(&self.dist, &o.dist, dist_eq)
             && all_same(&self.once.tail, &o.once.tail, dist_eq)
             && self.once.colour_end == o.once.colour_end
             && all_same(&self.bend, &o.bend, |a, b| {
-                a.ids == b.ids && same_f64(&bend(a), &bend(b))
+                a.ids == b.ids
+                    && same_f64(&a.k, &b.k)
+                    && same_f64(&a.wk, &b.wk)
+                    && same_f64(&[a.at, a.inv_denom], &[b.at, b.inv_denom])
             })
             && all_same(&self.once.batches, &o.once.batches, |a, b| {
-                (a.a, a.b) == (b.a, b.b) && same_f64(&batch(a), &batch(b))
+                (a.a, a.b) == (b.a, b.b)
+                    && same_f64(&a.rest, &b.rest)
+                    && same_f64(&a.ka, &b.ka)
+                    && same_f64(&a.kb, &b.kb)
             })
     }
 }
