@@ -132,8 +132,9 @@ pub struct SimSettings {
     /// (`RigidContext::body_pose_between`), while colliders are extrapolated from
     /// `i * substep / deformable_inner` after the rigid state.
     pub deformable_inner: u32,
-    /// Linear speed (m/s) of a rigid body above which the rigid physics is reported as blown up
-    /// (the episode ends with an error naming the body).
+    /// Linear speed (m/s) of a rigid body, by its velocity or by its displacement over a rapier
+    /// step, above which the rigid physics is reported as blown up (the episode ends with an
+    /// error naming the body).
     pub max_body_speed: f64,
 }
 

@@ -362,15 +362,31 @@ impl RigidContext {
         (Bvh::from_leaves(BvhBuildStrategy::Binned, &aabbs), leaves)
     }
 
-    /// The fastest body whose linear speed is above `max` (m/s), with its speed.
-    pub fn fastest_body_above(&self, max: f64) -> Option<(RigidBodyHandle, f64)> {
-        let max2 = (max * max) as f32;
-        self.bodies
+    /// The fastest body whose speed is above `max` (m/s), with its speed: the larger of its
+    /// linear velocity and its displacement over the last step of `dt` seconds divided by `dt`
+    /// (a blown-up articulation can end a step far away with a moderate velocity: a Spot body
+    /// 2 km from where the step began, its velocity under 100 m/s).
+    pub fn fastest_body_above(&self, max: f64, dt: f64) -> Option<(RigidBodyHandle, f64)> {
+        let by_velocity = self
+            .bodies
             .iter()
-            .map(|(h, b)| (h, b.linvel().length_squared()))
-            .filter(|&(_, v2)| v2 > max2)
+            .map(|(h, b)| (h, f64::from(b.linvel().length())));
+        let by_displacement = self
+            .body_ids
+            .iter()
+            .zip(&self.step_start)
+            .filter(|_| dt > 0.0)
+            .filter_map(|(&(h, _), start)| {
+                let now = pose_from_rapier(self.bodies.get(h)?.position());
+                Some((
+                    h,
+                    (now.translation.vector - start.translation.vector).norm() / dt,
+                ))
+            });
+        by_velocity
+            .chain(by_displacement)
+            .filter(|&(_, v)| v > max)
             .max_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|(h, v2)| (h, f64::from(v2.sqrt())))
     }
 
     /// Advances the rigid world by `dt` seconds, applying pending reactions as forces.
@@ -648,7 +664,8 @@ fn rigid_step(
         errors.raise(e);
         return;
     }
-    if let Some((h, speed)) = ctx.fastest_body_above(settings.max_body_speed) {
+    if let Some((h, speed)) = ctx.fastest_body_above(settings.max_body_speed, settings.substep_dt())
+    {
         let name = names
             .iter()
             .find(|(r, _)| r.0 == h)
@@ -735,5 +752,36 @@ impl Stateful for RigidContext {
                 h.write_f64(*x);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rapier3d::prelude::{ColliderBuilder, RigidBodyBuilder};
+
+    #[test]
+    fn a_body_displaced_far_in_a_step_counts_as_fast_whatever_its_velocity() {
+        let mut ctx = RigidContext::new();
+        let body = ctx.bodies.insert(RigidBodyBuilder::dynamic().build());
+        let collider = ColliderBuilder::ball(0.1).build();
+        ctx.colliders
+            .insert_with_parent(collider, body, &mut ctx.bodies);
+        ctx.register_body(body, Entity::PLACEHOLDER);
+        let dt = 1.0 / 60.0;
+        ctx.step(dt).unwrap();
+        // a free fall for one step: far below 100 m/s either way
+        assert_eq!(ctx.fastest_body_above(100.0, dt), None);
+        // the body ends the step 2 km away (as a blown-up articulation did), at rest
+        let far = rapier3d::math::Pose::translation(2000.0, 0.0, 0.0);
+        let b = ctx.bodies.get_mut(body).unwrap();
+        b.set_position(far, false);
+        b.set_linvel(rapier3d::math::Vector::ZERO, false);
+        let (h, speed) = ctx.fastest_body_above(100.0, dt).expect("caught");
+        println!("displaced 2 km in 1/60 s at rest: {speed:.3e} m/s (limit 100)");
+        assert_eq!(h, body);
+        assert!((speed - 2000.0 / dt).abs() < 1.0, "{speed}");
+        // without a step length only the velocity counts
+        assert_eq!(ctx.fastest_body_above(100.0, 0.0), None);
     }
 }

@@ -155,8 +155,9 @@ pub struct PhysicsDesc {
     /// while the rigid world (robots) takes the coarser substeps.
     #[serde(default)]
     pub deformable_substeps: Option<u32>,
-    /// Linear speed (m/s) of any rigid body above which the rigid physics counts as blown up
-    /// and the episode ends with an error naming the body (default 100). Rapier only flags
+    /// Linear speed (m/s) of any rigid body, by its velocity or by its displacement over a rapier
+    /// step, above which the rigid physics counts as blown up and the episode ends with an error
+    /// naming the body (default 100). Rapier only flags
     /// non-finite states; a robot flung by diverging contact forces moves at finite, absurd
     /// speeds (a Spot link at 10^9 m after 500 steps) and would otherwise keep scoring.
     #[serde(default = "default_max_body_speed")]
