@@ -4,8 +4,9 @@
 use crate::element::{barycentric_gradients, shape_gradients, QuadraticMesh, NQ, QUAD_POINTS};
 use crate::error::FemError;
 use crate::material::{Material, StableNeoHookean};
-use crate::sparse::BlockPattern;
+use crate::sparse::{BlockPattern, Profile};
 use nalgebra::{Matrix3, SMatrix, Vector3};
+use std::sync::Arc;
 
 /// Compiled, immutable model of a quadratic-tet solid (shared by value; cheap to clone behind an
 /// `Arc` on the engine side). Arrays are structure-of-arrays, world frame, SI units.
@@ -35,6 +36,8 @@ pub struct SolidModel {
     pub elem_blocks: Vec<u32>,
     /// Reverse Cuthill-McKee node order (`order[new] = old`) for the Cholesky factor.
     pub order: Vec<u32>,
+    /// The Cholesky factor's envelope in `order`, shared by every factor of this model.
+    pub profile: Arc<Profile>,
     /// Boundary nodes (corners and edge nodes of boundary faces), sorted.
     pub surface_nodes: Vec<u32>,
     /// Nodes of each boundary face: its 3 corners (outward orientation) then the edge nodes of
@@ -295,6 +298,7 @@ impl SolidModel {
             }
         }
         let order = pattern.rcm();
+        let profile = Arc::new(Profile::new(&pattern, &order));
         let surface_nodes = mesh.boundary_nodes();
         let surface_faces = mesh
             .boundary_faces
@@ -325,6 +329,7 @@ impl SolidModel {
             volume,
             pattern,
             elem_blocks,
+            profile,
             order,
             surface_nodes,
             surface_faces,

@@ -70,7 +70,7 @@ impl ContactFactor {
         diag: &[u32],
         penalties: &[Penalty],
         (factor_cost, solve_cost): (f64, f64),
-        factor: impl Fn(&[Matrix3<f64>]) -> Result<ProfileCholesky, FemError>,
+        factor: impl Fn(&[Matrix3<f64>], &[(usize, Matrix3<f64>)]) -> Result<ProfileCholesky, FemError>,
     ) -> Result<(Self, usize), FemError> {
         let n = diag.len();
         let rank: usize = penalties.iter().map(|p| if p.2 { 3 } else { 1 }).sum();
@@ -87,16 +87,27 @@ impl ContactFactor {
             None => (None, Vec::new()),
         };
         let full = |base: Option<ProfileCholesky>| -> Result<(Self, usize), FemError> {
-            let mut m = a.to_vec();
+            // the penalised diagonal blocks, summed in the penalties' order (a node may have
+            // several), in place of `a`'s in the factorisation: no copy of the matrix
+            let mut blocks: Vec<(usize, Matrix3<f64>)> = Vec::with_capacity(penalties.len());
             for &(node, nrm, stick, k) in penalties {
                 let proj = if stick {
                     Matrix3::identity()
                 } else {
                     nrm * nrm.transpose()
                 };
-                m[diag[node as usize] as usize] += proj * k;
+                let d = diag[node as usize] as usize;
+                let i = match blocks.iter().position(|b| b.0 == d) {
+                    Some(i) => i,
+                    None => {
+                        blocks.push((d, a[d]));
+                        blocks.len() - 1
+                    }
+                };
+                blocks[i].1 += proj * k;
             }
-            let contacts = Contacts::Full(factor(&m)?);
+            blocks.sort_unstable_by_key(|b| b.0);
+            let contacts = Contacts::Full(factor(a, &blocks)?);
             Ok((ContactFactor { base, contacts }, 1))
         };
         if rank > 0 && low_rank_cost >= factor_cost {
@@ -104,7 +115,7 @@ impl ContactFactor {
         }
         let (mut b, factored) = match base {
             Some(b) => (b, 0),
-            None => (factor(a)?, 1),
+            None => (factor(a, &[])?, 1),
         };
         if rank == 0 {
             let contacts = Contacts::None;
@@ -225,8 +236,10 @@ mod tests {
     #[test]
     fn low_rank_contacts_solve_like_the_factored_penalties() {
         let (pat, a) = banded(40);
-        let order = pat.rcm();
-        let factor = |m: &[Matrix3<f64>]| ProfileCholesky::factor(&pat, m, &order);
+        let profile = std::sync::Arc::new(crate::sparse::Profile::new(&pat, &pat.rcm()));
+        let factor = |m: &[Matrix3<f64>], blocks: &[(usize, Matrix3<f64>)]| {
+            ProfileCholesky::factor(&profile, &pat, m, blocks)
+        };
         let k = 1e6 * a[pat.diag[0] as usize].norm();
         let penalties: Vec<Penalty> = vec![
             (7, Vector3::new(0.0, 0.6, 0.8), false, k),

@@ -487,7 +487,7 @@ impl FemSolid {
             next_id: 1,
             precond_at: None,
             precond: None,
-            profile_costs: ProfileCholesky::costs(&model.pattern, &model.order),
+            profile_costs: model.profile.costs(),
             precond_mat: Vec::new(),
             precond_mat_key: None,
             precond_gen: 0,
@@ -1217,7 +1217,9 @@ impl FemSolid {
             .precond_at
             .clone()
             .unwrap_or_else(|| self.model.mesh.rest.clone());
-        let mut vals = vec![Matrix3::zeros(); self.model.pattern.cols.len()];
+        // the last matrix's buffer (`eval` overwrites every block) instead of a fresh one
+        let mut vals = std::mem::take(&mut self.precond_mat);
+        vals.resize(self.model.pattern.cols.len(), Matrix3::zeros());
         let mut g = vec![Vector3::zeros(); self.n_nodes()];
         // at the rest shape unprojected (exact there); at a deformed reference shape projected
         // (ARCHITECTURE.md: an unprojected tangent in compression was nearly singular and gave
@@ -1268,7 +1270,7 @@ impl FemSolid {
             &pat.diag,
             &penalties,
             self.profile_costs,
-            |m| ProfileCholesky::factor(pat, m, &self.model.order),
+            |m, blocks| ProfileCholesky::factor(&self.model.profile, pat, m, blocks),
         )
     }
 

@@ -11,6 +11,7 @@
 use crate::error::FemError;
 use modesuite_engine::simd::have_avx2;
 use nalgebra::{Matrix3, Vector3};
+use std::sync::Arc;
 
 /// Sparsity pattern of a symmetric 3x3 block matrix over nodes (both triangles stored).
 #[derive(Clone, Debug)]
@@ -158,31 +159,24 @@ impl BlockPattern {
     }
 }
 
-/// Profile (envelope) Cholesky factor `L L^T` of a symmetric positive definite matrix given as 3x3
-/// blocks, in a node ordering; row `i` stores columns `first[i]..=i` contiguously.
-#[derive(Clone, Debug)]
-pub struct ProfileCholesky {
+/// The envelope of a block pattern in a node order: which entries a [`ProfileCholesky`] stores.
+/// A pure function of the pattern and the order, so a model computes it once and all its
+/// factors (and all environments' copies of a solid) share it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Profile {
     /// `perm[new_node] = old_node`.
     perm: Vec<u32>,
     /// `inv[old_node] = new_node`.
     inv: Vec<u32>,
     /// First stored column of each scalar row.
     first: Vec<u32>,
-    /// Offset of each scalar row's first entry in `vals`.
+    /// Offset of each scalar row's first entry in the values (`start[n]` is their count).
     start: Vec<usize>,
-    /// Factor entries, row by row.
-    vals: Vec<f64>,
-    /// Reciprocals of the factor's diagonal (multiplications instead of divisions on the
-    /// substitutions' dependency chains).
-    dinv: Vec<f64>,
-    /// Scratch vector (permuted right-hand side).
-    work: Vec<f64>,
 }
 
-impl ProfileCholesky {
-    /// The envelope of pattern `pat` in node order `perm`: `inv[old] = new`, each scalar row's
-    /// first stored column and its offset in the factor's values (`start[n]` is their count).
-    fn profile(pat: &BlockPattern, perm: &[u32]) -> (Vec<u32>, Vec<u32>, Vec<usize>) {
+impl Profile {
+    /// The envelope of pattern `pat` in node order `perm` (`perm[new] = old`).
+    pub fn new(pat: &BlockPattern, perm: &[u32]) -> Self {
         let nn = pat.n();
         let mut inv = vec![0u32; nn];
         for (new, &old) in perm.iter().enumerate() {
@@ -204,32 +198,61 @@ impl ProfileCholesky {
             first[r] = 3 * first_node[r / 3];
             start[r + 1] = start[r] + (r + 1 - first[r] as usize);
         }
-        (inv, first, start)
+        Profile {
+            perm: perm.to_vec(),
+            inv,
+            first,
+            start,
+        }
     }
 
-    /// Flops of one factorisation and of one solve (forward and back substitution) for the
-    /// pattern `pat` in node order `perm`: their ratio decides whether a low-rank update beats a
-    /// new factorisation.
-    pub fn costs(pat: &BlockPattern, perm: &[u32]) -> (f64, f64) {
-        let (_, first, _) = Self::profile(pat, perm);
+    /// Flops of one factorisation and of one solve (forward and back substitution) in this
+    /// profile: their ratio decides whether a low-rank update beats a new factorisation.
+    pub fn costs(&self) -> (f64, f64) {
         let mut factor = 0.0;
         let mut solve = 0.0;
-        for (i, &f) in first.iter().enumerate() {
+        for (i, &f) in self.first.iter().enumerate() {
             let len = (i - f as usize) as f64;
             factor += len * len;
             solve += 4.0 * len;
         }
         (factor, solve)
     }
+}
 
-    /// Factors the block matrix `vals` (pattern `pat`) in node order `perm` (`perm[new] = old`).
+/// Profile (envelope) Cholesky factor `L L^T` of a symmetric positive definite matrix given as 3x3
+/// blocks, in a node ordering; row `i` stores columns `first[i]..=i` contiguously.
+#[derive(Clone, Debug)]
+pub struct ProfileCholesky {
+    /// Node order and envelope (shared with the model's other factors).
+    profile: Arc<Profile>,
+    /// Factor entries, row by row.
+    vals: Vec<f64>,
+    /// Reciprocals of the factor's diagonal (multiplications instead of divisions on the
+    /// substitutions' dependency chains).
+    dinv: Vec<f64>,
+    /// Scratch vector (permuted right-hand side).
+    work: Vec<f64>,
+}
+
+impl ProfileCholesky {
+    /// Factors the block matrix `vals` (pattern `pat`) in the node order and envelope of
+    /// `profile` (made for `pat`), with the diagonal blocks listed in `diag_blocks` (block
+    /// index, value; sorted by index) taking the place of theirs in `vals`: a matrix that differs
+    /// from `vals` on a few diagonal blocks (contact penalties) without a copy of it.
     pub fn factor(
+        profile: &Arc<Profile>,
         pat: &BlockPattern,
         vals: &[Matrix3<f64>],
-        perm: &[u32],
+        diag_blocks: &[(usize, Matrix3<f64>)],
     ) -> Result<Self, FemError> {
         let nn = pat.n();
-        let (inv, first, start) = Self::profile(pat, perm);
+        let Profile {
+            perm,
+            inv,
+            first,
+            start,
+        } = &**profile;
         let n = first.len();
         let mut a = vec![0.0; start[n]];
         for old in 0..nn {
@@ -239,7 +262,13 @@ impl ProfileCholesky {
                 if nj > ni {
                     continue;
                 }
-                let b = &vals[k];
+                let b = match nj == ni {
+                    true => match diag_blocks.binary_search_by_key(&k, |d| d.0) {
+                        Ok(i) => &diag_blocks[i].1,
+                        Err(_) => &vals[k],
+                    },
+                    false => &vals[k],
+                };
                 for r in 0..3 {
                     let row = 3 * ni + r;
                     for c in 0..3 {
@@ -252,7 +281,7 @@ impl ProfileCholesky {
             }
         }
         let mut dinv = vec![0.0; n];
-        if let Err((i, d)) = kernels::factor(have_avx2(), &mut a, &mut dinv, &first, &start) {
+        if let Err((i, d)) = kernels::factor(have_avx2(), &mut a, &mut dinv, first, start) {
             return Err(FemError::NotPositiveDefinite(format!(
                 "pivot {d:e} at dof {} of node {}",
                 i % 3,
@@ -260,10 +289,7 @@ impl ProfileCholesky {
             )));
         }
         Ok(ProfileCholesky {
-            perm: perm.to_vec(),
-            inv,
-            first,
-            start,
+            profile: Arc::clone(profile),
             vals: a,
             dinv,
             work: vec![0.0; n],
@@ -277,8 +303,9 @@ impl ProfileCholesky {
 
     /// Solves `A x = b` in place (`b` becomes `x`).
     pub fn solve_in_place(&mut self, b: &mut [Vector3<f64>]) {
+        let p = &*self.profile;
         for (old, v) in b.iter().enumerate() {
-            let ni = self.inv[old] as usize;
+            let ni = p.inv[old] as usize;
             self.work[3 * ni] = v.x;
             self.work[3 * ni + 1] = v.y;
             self.work[3 * ni + 2] = v.z;
@@ -288,11 +315,11 @@ impl ProfileCholesky {
             &mut self.work,
             &self.vals,
             &self.dinv,
-            &self.first,
-            &self.start,
+            &p.first,
+            &p.start,
         );
         let y = &self.work;
-        for (new, &old) in self.perm.iter().enumerate() {
+        for (new, &old) in p.perm.iter().enumerate() {
             b[old as usize] = Vector3::new(y[3 * new], y[3 * new + 1], y[3 * new + 2]);
         }
     }
@@ -518,8 +545,8 @@ pub(crate) mod tests {
         for i in 0..n {
             vals[pat.diag[i] as usize] += Matrix3::identity() * 0.01;
         }
-        let perm = pat.rcm();
-        let mut f = ProfileCholesky::factor(&pat, &vals, &perm).unwrap();
+        let profile = Arc::new(Profile::new(&pat, &pat.rcm()));
+        let mut f = ProfileCholesky::factor(&profile, &pat, &vals, &[]).unwrap();
         let xs: Vec<Vector3<f64>> = (0..n)
             .map(|i| Vector3::new(i as f64, 1.0, -(i as f64).sin()))
             .collect();
@@ -572,12 +599,13 @@ pub(crate) mod tests {
     #[test]
     fn avx2_and_baseline_kernels_give_the_same_bits_and_match_a_plain_cholesky() {
         let (pat, vals) = banded(40);
-        let perm = pat.rcm();
-        let f = ProfileCholesky::factor(&pat, &vals, &perm).unwrap();
-        let n = f.first.len();
+        let profile = Arc::new(Profile::new(&pat, &pat.rcm()));
+        let f = ProfileCholesky::factor(&profile, &pat, &vals, &[]).unwrap();
+        let p = &*f.profile;
+        let n = p.first.len();
         // the profile's entries before factorisation
         let mut a0 = vec![0.0; f.vals.len()];
-        let inv = &f.inv;
+        let inv = &p.inv;
         for old in 0..pat.n() {
             let ni = inv[old] as usize;
             for k in pat.row_ptr[old] as usize..pat.row_ptr[old + 1] as usize {
@@ -586,7 +614,7 @@ pub(crate) mod tests {
                     for c in 0..3 {
                         let (row, col) = (3 * ni + r, 3 * nj + c);
                         if nj <= ni && col <= row {
-                            a0[f.start[row] + col - f.first[row] as usize] = vals[k][(r, c)];
+                            a0[p.start[row] + col - p.first[row] as usize] = vals[k][(r, c)];
                         }
                     }
                 }
@@ -595,17 +623,17 @@ pub(crate) mod tests {
         // plain sequential Cholesky of the same profile as the reference
         let mut plain = a0.clone();
         for i in 0..n {
-            let fi = f.first[i] as usize;
+            let fi = p.first[i] as usize;
             for j in fi..=i {
-                let fj = f.first[j] as usize;
-                let mut s = plain[f.start[i] + j - fi];
+                let fj = p.first[j] as usize;
+                let mut s = plain[p.start[i] + j - fi];
                 for k in fi.max(fj)..j {
-                    s -= plain[f.start[i] + k - fi] * plain[f.start[j] + k - fj];
+                    s -= plain[p.start[i] + k - fi] * plain[p.start[j] + k - fj];
                 }
-                plain[f.start[i] + j - fi] = if j == i {
+                plain[p.start[i] + j - fi] = if j == i {
                     s.sqrt()
                 } else {
-                    s / plain[f.start[j] + j - fj]
+                    s / plain[p.start[j] + j - fj]
                 };
             }
         }
@@ -620,9 +648,9 @@ pub(crate) mod tests {
         assert!(worst < 1e-12);
         let (mut base, mut wide) = (a0.clone(), a0);
         let (mut dbase, mut dwide) = (vec![0.0; n], vec![0.0; n]);
-        kernels::factor(false, &mut base, &mut dbase, &f.first, &f.start).unwrap();
+        kernels::factor(false, &mut base, &mut dbase, &p.first, &p.start).unwrap();
         let avx2 = have_avx2();
-        kernels::factor(avx2, &mut wide, &mut dwide, &f.first, &f.start).unwrap();
+        kernels::factor(avx2, &mut wide, &mut dwide, &p.first, &p.start).unwrap();
         assert!(base
             .iter()
             .zip(&wide)
@@ -633,9 +661,36 @@ pub(crate) mod tests {
             .all(|(a, b)| a.to_bits() == b.to_bits()));
         let rhs: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
         let (mut y0, mut y1) = (rhs.clone(), rhs);
-        kernels::solve(false, &mut y0, &base, &dbase, &f.first, &f.start);
-        kernels::solve(avx2, &mut y1, &wide, &dwide, &f.first, &f.start);
+        kernels::solve(false, &mut y0, &base, &dbase, &p.first, &p.start);
+        kernels::solve(avx2, &mut y1, &wide, &dwide, &p.first, &p.start);
         assert!(y0.iter().zip(&y1).all(|(a, b)| a.to_bits() == b.to_bits()));
         println!("AVX2 available: {avx2}; both kernels gave the same bits");
+    }
+
+    #[test]
+    fn replaced_diagonal_blocks_factor_as_the_changed_matrix() {
+        let (pat, vals) = banded(40);
+        let profile = Arc::new(Profile::new(&pat, &pat.rcm()));
+        let bump = |i: usize| Matrix3::new(5.0, 0.5, 0.0, 0.5, 3.0, 0.0, 0.0, 0.0, 1e6 * i as f64);
+        let mut changed = vals.clone();
+        let mut blocks = Vec::new();
+        for node in [3usize, 17, 30] {
+            let k = pat.diag[node] as usize;
+            changed[k] += bump(node);
+            blocks.push((k, changed[k]));
+        }
+        blocks.sort_by_key(|b| b.0);
+        let mut copied = ProfileCholesky::factor(&profile, &pat, &changed, &[]).unwrap();
+        let mut replaced = ProfileCholesky::factor(&profile, &pat, &vals, &blocks).unwrap();
+        let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+        assert!(same(&copied.vals, &replaced.vals) && same(&copied.dinv, &replaced.dinv));
+        let rhs: Vec<Vector3<f64>> = (0..40).map(|i| Vector3::new(1.0, i as f64, -0.5)).collect();
+        let (mut x1, mut x2) = (rhs.clone(), rhs);
+        copied.solve_in_place(&mut x1);
+        replaced.solve_in_place(&mut x2);
+        assert!(x1
+            .iter()
+            .zip(&x2)
+            .all(|(a, b)| same(a.as_slice(), b.as_slice())));
     }
 }
