@@ -34,9 +34,8 @@ pub struct SolidModel {
     pub pattern: BlockPattern,
     /// Block index of local pair `(a, b)` of each element: `[element * 100 + 10 a + b]`.
     pub elem_blocks: Vec<u32>,
-    /// Reverse Cuthill-McKee node order (`order[new] = old`) for the Cholesky factor.
-    pub order: Vec<u32>,
-    /// The Cholesky factor's envelope in `order`, shared by every factor of this model.
+    /// The Cholesky factor's node order (reverse Cuthill-McKee) and envelope, shared by every
+    /// factor of this model.
     pub profile: Arc<Profile>,
     /// Boundary nodes (corners and edge nodes of boundary faces), sorted.
     pub surface_nodes: Vec<u32>,
@@ -297,8 +296,7 @@ impl SolidModel {
                 }
             }
         }
-        let order = pattern.rcm();
-        let profile = Arc::new(Profile::new(&pattern, &order));
+        let profile = Arc::new(Profile::new(&pattern, &pattern.rcm()));
         let surface_nodes = mesh.boundary_nodes();
         let surface_faces = mesh
             .boundary_faces
@@ -330,7 +328,6 @@ impl SolidModel {
             pattern,
             elem_blocks,
             profile,
-            order,
             surface_nodes,
             surface_faces,
             length_scale,

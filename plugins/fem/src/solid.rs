@@ -1474,7 +1474,7 @@ impl FemSolid {
                 *gi = -*gi;
             }
             Self::apply_filter(&self.active, &mut grad);
-            let gnorm = grad.iter().fold(0.0f64, |m, v| m.max(v.amax()));
+            let gnorm = max_component(&grad);
             if gnorm == 0.0 {
                 self.grad = grad;
                 self.hess = hess;
@@ -1517,7 +1517,7 @@ impl FemSolid {
                 self.delta = delta;
                 continue;
             }
-            let step_max = delta.iter().fold(0.0f64, |m, v| m.max(v.amax()));
+            let step_max = max_component(&delta);
             if !step_max.is_finite() {
                 self.grad = grad;
                 self.hess = hess;
@@ -1565,9 +1565,9 @@ impl FemSolid {
             self.hess = hess;
             self.delta = delta;
             if step_max * alpha <= tol_x {
-                // `grad` holds the filtered residual at the start of this iteration
-                stats.converged = (alpha > 0.0 || step_max <= tol_x)
-                    && max_component(&self.grad) <= self.residual_bound(p);
+                // `gnorm`: the filtered residual at the start of this iteration
+                stats.converged =
+                    (alpha > 0.0 || step_max <= tol_x) && gnorm <= self.residual_bound(p);
                 break;
             }
             if alpha == 0.0 {
@@ -1654,9 +1654,6 @@ impl FemSolid {
         Ok(())
     }
 
-    /// Chord (quasi-Newton) iterations with the cached factor as the Newton matrix, Armijo line
-    /// search on the potential, and a refactor at the current shape when the contraction rate
-    /// exceeds 0.5 (the reference shape no longer represents the tangent).
     /// Largest residual force (N, any component) with which a dynamic step's small final step
     /// counts as convergence: a tenth of the force that would move the heaviest node by the
     /// solid's size within the step (`m l / dt^2`; no bound for statics). Converged steps of the
@@ -1672,6 +1669,9 @@ impl FemSolid {
         }
     }
 
+    /// Chord (quasi-Newton) iterations with the cached factor as the Newton matrix, Armijo line
+    /// search on the potential, and a refactor at the current shape when the contraction rate
+    /// exceeds 0.5 (the reference shape no longer represents the tangent).
     fn chord(
         &mut self,
         p: &Problem,
@@ -1755,7 +1755,7 @@ impl FemSolid {
                 Self::apply_filter(&self.active, &mut delta);
                 stats.linear_iterations += 1;
             }
-            let step_max = delta.iter().fold(0.0f64, |m, v| m.max(v.amax()));
+            let step_max = max_component(&delta);
             if !step_max.is_finite() {
                 self.delta = delta;
                 return Err(FemError::Exploded {

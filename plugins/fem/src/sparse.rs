@@ -262,13 +262,10 @@ impl ProfileCholesky {
                 if nj > ni {
                     continue;
                 }
-                let b = match nj == ni {
-                    true => match diag_blocks.binary_search_by_key(&k, |d| d.0) {
-                        Ok(i) => &diag_blocks[i].1,
-                        Err(_) => &vals[k],
-                    },
-                    false => &vals[k],
-                };
+                let b = (nj == ni)
+                    .then(|| diag_blocks.binary_search_by_key(&k, |d| d.0).ok())
+                    .flatten()
+                    .map_or(&vals[k], |i| &diag_blocks[i].1);
                 for r in 0..3 {
                     let row = 3 * ni + r;
                     for c in 0..3 {
