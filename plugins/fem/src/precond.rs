@@ -60,10 +60,11 @@ impl ContactFactor {
     /// Factors `a` (the block values of `A`; `diag[i]` is node `i`'s diagonal block) with the
     /// `penalties`, reusing `base` (a factor of `A` and columns solved with it) where given.
     /// `factor` factors block values with some diagonal blocks replaced (block index, value;
-    /// sorted, see [`ProfileCholesky::factor`]); `costs` are the flops of one factorisation and of one solve in this profile. Returns the
-    /// factor and the number of factorisations done. `contacts_changed` says that `A` was
-    /// factored before with other contacts: a base factor is then worth its cost even where this
-    /// contact set alone would not repay it, as the next set will reuse it.
+    /// sorted, see [`ProfileCholesky::factor`]); `costs` are the flops of one factorisation and
+    /// of one solve in this profile. Returns the factor and the number of factorisations done.
+    /// `contacts_changed` says that `A` was factored before with other contacts: a base factor
+    /// is then worth its cost even where this contact set alone would not repay it, as the next
+    /// set will reuse it.
     pub(crate) fn new(
         base: Option<(ProfileCholesky, Solved)>,
         contacts_changed: bool,
