@@ -3,6 +3,8 @@
 use clap::Parser;
 
 fn main() {
+    // before any thread starts: headless runs print no Wayland probe errors
+    modesuite_render::gpu::quiet_device_select_without_session();
     let cli = modesuite::cli::Cli::parse();
     let stdout = std::io::stdout();
     let mut out = stdout.lock();

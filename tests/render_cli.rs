@@ -52,10 +52,19 @@ fn run_with_video_writes_a_decodable_gif_and_png_frames() {
         .arg(&gif)
         .arg("--frames")
         .arg(&frames)
+        // a headless session (CI, a container): no Wayland probe noise on stderr
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .env_remove("MESA_VK_DEVICE_SELECT")
         .output()
         .unwrap();
     let stdout = ok(&out);
     println!("{stdout}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !stderr.contains("error"),
+        "a successful headless run printed errors:\n{stderr}"
+    );
     // dt 1/60: one frame every 2 env steps, plus the reset frame: 11 frames.
     let (w, h, n) = gif_info(&gif).unwrap_or_else(|e| panic!("{e}"));
     println!("gif {w}x{h}, {n} frames (expected 96x64, 11)");

@@ -27,6 +27,27 @@ const DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
 pub const SOFTWARE_DRIVER_PACKAGES: &str =
     "mesa-vulkan-drivers libvulkan1 (Vulkan, lavapipe) or libegl-mesa0 libgl1-mesa-dri (OpenGL, llvmpipe)";
 
+/// Keeps Mesa's Vulkan device-select layer from looking for a Wayland session where there is
+/// none. That implicit layer (installed with Mesa's Vulkan drivers, lavapipe's included) connects
+/// to Wayland to pick a default GPU whenever an instance enables the Wayland surface extension, as
+/// wgpu's do; without a session (`XDG_RUNTIME_DIR` unset: a headless machine, a container, CI)
+/// libwayland prints `error: XDG_RUNTIME_DIR is invalid or not set in the environment.` to
+/// stderr for every instance, which reads as a failure of the run. [`RenderDevice::new`] ranks
+/// the adapters itself, so the layer is switched off (`NODEVICE_SELECT=1`, its manifest's
+/// `disable_environment`) unless the user set that variable or chose a device with
+/// `MESA_VK_DEVICE_SELECT`. Returns whether it switched the layer off.
+///
+/// It sets an environment variable: call it at the start of `main`, before other threads run.
+pub fn quiet_device_select_without_session() -> bool {
+    let unset = |k: &str| std::env::var_os(k).is_none();
+    let off =
+        unset("XDG_RUNTIME_DIR") && unset("NODEVICE_SELECT") && unset("MESA_VK_DEVICE_SELECT");
+    if off {
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
+    off
+}
+
 /// Runs a future to completion on this thread (wgpu's native futures resolve without an
 /// executor; this parks until woken).
 pub(crate) fn block_on<F: Future>(f: F) -> F::Output {
