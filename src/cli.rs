@@ -923,7 +923,7 @@ fn run_scene(
     if !args.json {
         writeln!(
             out,
-            "{:>7} {:>12} {:>8} {:>7} {:>9} {:>12}  error",
+            "{:>7} {:>12} {:>8} {:>7} {:>9} {:>12}  end",
             "episode", "return", "success", "steps", "time_s", "steps/s"
         )
         .map_err(io)?;
@@ -949,9 +949,12 @@ fn run_scene(
         let mut length = 0;
         let mut success = None;
         let mut error = None;
+        // the run's --steps ends it unless the episode ends first
+        let mut end = EpisodeEnd::Steps;
         for i in 0..steps {
             if let Err(e) = policy.act(&env, &mut action) {
                 error = Some(format!("policy: {e}"));
+                end = EpisodeEnd::Error;
                 break;
             }
             let o = env.step(&action);
@@ -970,6 +973,7 @@ fn run_scene(
             if o.terminated || o.truncated {
                 success = final_success(success, o.info.success, o.info.error.is_some());
                 error = o.info.error.clone();
+                end = EpisodeEnd::of(&o);
                 break;
             }
             success = o.info.success;
@@ -997,7 +1001,8 @@ fn run_scene(
                 out,
                 "{}",
                 json!({"episode": ep, "seed": seed, "return": ret, "length": length,
-                       "success": success, "error": error, "wall_s": wall, "steps_per_s": sps})
+                       "success": success, "error": error, "ended": end.name(),
+                       "terminations": end.terminations(), "wall_s": wall, "steps_per_s": sps})
             )
             .map_err(io)?;
         } else {
@@ -1010,7 +1015,10 @@ fn run_scene(
                 length,
                 wall,
                 sps,
-                error.as_deref().unwrap_or("")
+                match &error {
+                    Some(e) => format!("error: {e}"),
+                    None => end.to_string(),
+                }
             )
             .map_err(io)?;
         }
@@ -1051,6 +1059,72 @@ fn run_scene(
         .map_err(io)?;
     }
     Ok(())
+}
+
+/// How a run's episode ended (`run --json`'s `ended` and `terminations`).
+#[derive(Debug, Clone, PartialEq)]
+enum EpisodeEnd {
+    /// Terminated with the task's success.
+    Success,
+    /// Terminated without success: a failure termination term fired (names of those that did,
+    /// from the step's `termination/<name>` values; empty when another system ended it).
+    Failure(Vec<String>),
+    /// Truncated by the scene's time limit (`episode_steps`).
+    TimeLimit,
+    /// Ended by an error (physics blow-up, bad action, plugin or policy failure).
+    Error,
+    /// Still running when the run's `--steps` were done.
+    Steps,
+}
+
+impl EpisodeEnd {
+    /// The end of the step `o` that ended its episode (`terminated` or `truncated`).
+    fn of(o: &StepOutcome) -> Self {
+        if o.info.error.is_some() {
+            EpisodeEnd::Error
+        } else if o.terminated && o.info.success == Some(true) {
+            EpisodeEnd::Success
+        } else if o.terminated {
+            EpisodeEnd::Failure(
+                o.info
+                    .values
+                    .iter()
+                    .filter(|(_, v)| **v != 0.0)
+                    .filter_map(|(k, _)| k.strip_prefix("termination/").map(str::to_string))
+                    .collect(),
+            )
+        } else {
+            EpisodeEnd::TimeLimit
+        }
+    }
+
+    /// `success`, `failure`, `time_limit`, `error` or `steps`.
+    fn name(&self) -> &'static str {
+        match self {
+            EpisodeEnd::Success => "success",
+            EpisodeEnd::Failure(_) => "failure",
+            EpisodeEnd::TimeLimit => "time_limit",
+            EpisodeEnd::Error => "error",
+            EpisodeEnd::Steps => "steps",
+        }
+    }
+
+    /// The failure termination terms that fired (empty for other ends).
+    fn terminations(&self) -> &[String] {
+        match self {
+            EpisodeEnd::Failure(t) => t,
+            _ => &[],
+        }
+    }
+}
+
+impl std::fmt::Display for EpisodeEnd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.terminations() {
+            [] => f.write_str(self.name()),
+            t => write!(f, "{}: {}", self.name(), t.join(", ")),
+        }
+    }
 }
 
 /// An episode's success from its last step: that step's value, except that an episode ended by

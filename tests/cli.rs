@@ -14,6 +14,18 @@ fn tmp(name: &str) -> std::path::PathBuf {
     dir.join(name)
 }
 
+/// Runs `cmd`, asserts that it succeeded (showing its stderr if not) and returns its stdout.
+fn stdout_ok(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "exit {:?}: {}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
 #[test]
 fn drop_scene_dump_shows_bodies_at_rest_on_the_ground() {
     let dump = tmp("drop.json");
@@ -98,6 +110,9 @@ fn run_json_prints_one_object_per_episode_and_a_summary() {
         ] {
             assert!(l.get(k).is_some(), "missing {k} in {l}");
         }
+        // no task: the run's --steps end every episode
+        assert_eq!(l["ended"], "steps", "{l}");
+        assert_eq!(l["terminations"], serde_json::json!([]), "{l}");
     }
     assert_eq!(lines[3]["summary"], true);
     assert_eq!(lines[3]["episodes"], 3);
@@ -106,16 +121,7 @@ fn run_json_prints_one_object_per_episode_and_a_summary() {
 
 #[test]
 fn bench_json_has_the_stable_keys() {
-    let out = modesuite()
-        .args(["bench", "engine", "--json", "--scale", "0.002"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8(out.stdout).unwrap();
+    let text = stdout_ok(modesuite().args(["bench", "engine", "--json", "--scale", "0.002"]));
     let mut cases = Vec::new();
     for l in text.lines() {
         let v: serde_json::Value = serde_json::from_str(l).unwrap();
@@ -187,21 +193,17 @@ fn default_command_runs_the_embedded_default() {
     // From an empty folder: the task files are embedded; the video goes to ./out.
     let dir = tmp("default");
     std::fs::create_dir_all(&dir).unwrap();
-    let out = modesuite()
-        .current_dir(&dir)
-        .env("MODESUITE_SCENES", &dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = stdout_ok(modesuite().current_dir(&dir).env("MODESUITE_SCENES", &dir));
     println!("{text}");
     assert!(text.contains("MoDe-Franka-Place-v0"), "{text}");
     assert!(
         text.contains("summary: 1 episodes, success rate 100.0 %"),
+        "{text}"
+    );
+    // the table's last column says how the episode ended
+    assert!(
+        text.lines()
+            .any(|l| l.trim_start().starts_with("0 ") && l.trim_end().ends_with(" success")),
         "{text}"
     );
     let gif = std::fs::read(dir.join("out/MoDe-Franka-Place-v0.gif")).unwrap();
@@ -240,17 +242,8 @@ fn bench_suites_json_have_their_keys() {
             &["task"][..],
         ),
     ] {
-        let out = modesuite()
-            .args(["bench", suite, "--json", "--scale", "0.01"])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let lines: Vec<serde_json::Value> = String::from_utf8(out.stdout)
-            .unwrap()
+        let text = stdout_ok(modesuite().args(["bench", suite, "--json", "--scale", "0.01"]));
+        let lines: Vec<serde_json::Value> = text
             .lines()
             .map(|l| serde_json::from_str(l).unwrap())
             .collect();
@@ -297,4 +290,42 @@ fn bench_suites_json_have_their_keys() {
             );
         }
     }
+}
+
+#[test]
+fn run_json_says_how_each_episode_ended() {
+    // A failure termination on the robot's base frame: inside the box it fires on the first
+    // step; with the box elsewhere the scene's time limit ends the episode.
+    let dir = tmp("ended");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = |lo: f64, hi: f64| {
+        format!(
+            r#"Scene(
+    objects: [(name: "ground", shape: Plane(size: (10.0, 10.0)), body: Static)],
+    extensions: {{
+        "robots": [(name: "robot", model: "franka")],
+        "task": (terminations: {{"base_home": (term: "in_box", params: (
+            point: Base, center: Const((0.0, 0.0, 0.0)),
+            min: ({lo}, -0.5, -0.5), max: ({hi}, 0.5, 0.5),
+        ))}}),
+    }},
+    episode_steps: Some(4),
+)"#
+        )
+    };
+    let episode = |name: &str, text: String| -> serde_json::Value {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let text = stdout_ok(modesuite().arg("run").arg(&path).arg("--json"));
+        println!("{text}");
+        serde_json::from_str(text.lines().next().unwrap()).unwrap()
+    };
+    let failed = episode("home.scene.ron", scene(-0.5, 0.5));
+    assert_eq!(failed["ended"], "failure");
+    assert_eq!(failed["terminations"], serde_json::json!(["base_home"]));
+    assert_eq!(failed["length"], 1);
+    let timed_out = episode("away.scene.ron", scene(5.0, 6.0));
+    assert_eq!(timed_out["ended"], "time_limit");
+    assert_eq!(timed_out["terminations"], serde_json::json!([]));
+    assert_eq!(timed_out["length"], 4);
 }
