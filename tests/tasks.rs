@@ -1345,3 +1345,47 @@ fn envs_sharing_one_compiled_scene_step_as_separately_built_ones() {
         assert_ne!(hashes[0], hashes[1]);
     }
 }
+
+#[test]
+fn task_envs_are_bit_identical_on_one_or_two_threads_and_alone() {
+    // The determinism promise for the benchmark itself, every environment: a `VecEnv` of task
+    // envs gives the same bits on one thread and on two, and its env 2 the bits of an env run
+    // alone with env 2's seed and actions (FEM contact-factor caches, cloth, walking Spot),
+    // under changing actions.
+    let action = |k: usize, s: usize| 0.5 * ((s as f32) * 0.1 + k as f32).sin();
+    for id in modesuite::tasks::IMPLEMENTED {
+        let run = |threads: usize| -> Vec<u64> {
+            let envs = modesuite::cli::envs_for_target(id, None, 3).unwrap();
+            let mut v = modesuite::engine::VecEnv::new(envs, threads).unwrap();
+            v.reset(Some(10));
+            let dim = v.envs()[0].spaces().action.flat_dim();
+            let mut a = vec![0.0f32; 3 * dim];
+            for s in 0..25 {
+                for (k, x) in a.iter_mut().enumerate() {
+                    *x = action(k, s);
+                }
+                let out = v.step(&a).unwrap();
+                assert!(out.infos.iter().all(|i| i.error.is_none()), "{id}");
+            }
+            v.state_hashes()
+        };
+        let (one, two) = (run(1), run(2));
+        let mut alone = modesuite::cli::env_for_target(id, None).unwrap();
+        alone.reset(Some(12));
+        let dim = alone.spaces().action.flat_dim();
+        let mut a = vec![0.0f32; dim];
+        for s in 0..25 {
+            for (k, x) in a.iter_mut().enumerate() {
+                *x = action(k + 2 * dim, s);
+            }
+            alone.step(&a);
+        }
+        println!(
+            "{id}: 1 thread {one:x?}, 2 threads {two:x?}, alone (seed 12) {:x}",
+            alone.state_hash()
+        );
+        assert_eq!(one, two, "{id}: 1 vs 2 threads");
+        assert_eq!(one[2], alone.state_hash(), "{id}: env 2 vs alone");
+        assert_ne!(one[0], one[1], "{id}: envs differ");
+    }
+}
