@@ -1291,7 +1291,7 @@ fn rgbd_observation_of_the_robot_camera_follows_the_state_terms() {
         assert!(o.info.error.is_none(), "{:?}", o.info.error);
         assert_eq!(o.observation.len(), obs.len());
     }
-    // Errors: a camera the scene does not have, image history.
+    // Error: a camera the scene does not have.
     let (mut desc, source) = load(PLACE, None);
     modesuite::cli::override_rgbd(&mut desc, "nope").unwrap();
     let app = modesuite::cli::default_app();
@@ -1304,16 +1304,59 @@ fn rgbd_observation_of_the_robot_camera_follows_the_state_terms() {
         e.contains("camera_observation") && e.contains("\"nope\"") && e.contains("robot"),
         "{e}"
     );
+}
+
+#[test]
+fn image_observations_stack_their_history_item_by_item() {
+    // Two frames of (base xy, the robot camera's depth): a `Dict` of `state` (2, 2) and
+    // `robot_depth` (2, 128, 128, 1), each item's frames oldest first (Gymnasium's frame
+    // stacking); a reset repeats its first frame, each step shifts the frames by one.
     let text = place_text(
         r#"events: {"robot_start""#,
         r#"observations: {"policy": (terms: [(term: "base_xy"), (term: "camera", params: (camera: "robot", channels: Depth))], history: 2)}, events: {"robot_start""#,
     );
-    let e = scene_error(&text);
-    println!("{e}");
-    assert!(
-        e.contains("history") && e.contains("not implemented"),
-        "{e}"
+    let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
+    let mut app = modesuite::cli::default_app();
+    let model = app
+        .compile_scene(&desc, &SceneSource::in_memory(dir))
+        .unwrap_or_else(|e| panic!("{e}"));
+    modesuite::cli::spawn_with_cameras(&mut app, model).unwrap_or_else(|e| panic!("{e}"));
+    let mut env = Env::new(app);
+    let Space::Dict(items) = env.spaces().observation.clone() else {
+        panic!("{:?}", env.spaces().observation)
+    };
+    let shapes: Vec<(&str, Vec<usize>)> = items
+        .iter()
+        .map(|(n, s)| match s {
+            Space::Box { shape, .. } => (n.as_str(), shape.clone()),
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    println!("{shapes:?}");
+    assert_eq!(
+        shapes,
+        [("state", vec![2, 2]), ("robot_depth", vec![2, 128, 128, 1])]
     );
+    let n = 128 * 128;
+    let (mut prev, info) = env.reset(Some(0));
+    assert!(info.error.is_none(), "{:?}", info.error);
+    assert_eq!(prev.len(), 2 * 2 + 2 * n);
+    assert_eq!(prev[0..2], prev[2..4], "a reset repeats its first frame");
+    assert_eq!(prev[4..4 + n], prev[4 + n..]);
+    let mut action = vec![0.0f32; env.spaces().action.flat_dim()];
+    action[0] = 0.5;
+    for _ in 0..5 {
+        let o = env.step(&action);
+        assert!(o.info.error.is_none(), "{:?}", o.info.error);
+        let obs = o.observation;
+        // the older frame of each item is the newer one of the step before
+        assert_eq!(obs[0..2], prev[2..4]);
+        assert_eq!(obs[4..4 + n], prev[4 + n..]);
+        prev = obs;
+    }
+    println!("base xy: older {:?}, newer {:?}", &prev[0..2], &prev[2..4]);
+    assert_ne!(prev[0..2], prev[2..4], "the base moved between the frames");
 }
 
 #[test]

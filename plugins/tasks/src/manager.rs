@@ -167,6 +167,10 @@ pub struct Task {
     pub base_height: f64,
     /// Cloth objects (name, entity).
     cloths: Vec<(String, Entity)>,
+    /// Per observation group: the lengths of a frame's items ([`frame_items`]) where the group
+    /// stacks images over more than one frame (its buffer is then item by item, each item's
+    /// frames oldest first); empty otherwise (frame after frame).
+    stacked_items: Arc<Vec<Vec<usize>>>,
 }
 
 /// Per-env task state (part of the snapshot).
@@ -649,13 +653,6 @@ impl SceneSection for TaskSection {
                     });
                 }
             }
-            if gd.history > 1 && terms.iter().any(|t| t.term.term.image().is_some()) {
-                return Err(serr(
-                    &format!("{gpath}.history"),
-                    gd.history.to_string(),
-                    "1 in a group with camera images (stacked image history is not implemented)",
-                ));
-            }
             groups.push(Group {
                 name: g.clone(),
                 terms,
@@ -886,6 +883,21 @@ impl SceneSection for TaskSection {
             held.map_err(|er| serr(&hpath, format!("{} nodes", nodes.len()), er.to_string()))?;
         }
         let stage_slots = n_stages(&points);
+        let stacked_items = model
+            .groups
+            .iter()
+            .map(|g| {
+                if g.history > 1 && has_images(g) {
+                    frame_items(g, &dims)
+                        .iter()
+                        .map(|(_, s)| s.flat_dim())
+                        .collect()
+                } else {
+                    Vec::new()
+                }
+            })
+            .collect::<Vec<_>>()
+            .into();
         let task = Task {
             model: model.clone(),
             points,
@@ -894,6 +906,7 @@ impl SceneSection for TaskSection {
             leg_joints,
             base_height,
             cloths,
+            stacked_items,
         };
         let observation = model
             .groups
@@ -941,15 +954,40 @@ impl SceneSection for TaskSection {
     }
 }
 
-/// The space of the `policy` group: one unbounded box of every run of state terms (stacked
-/// `history` times) or, with camera terms, a `Dict` of `state` boxes and one
-/// `<camera>_<channels>` box of shape (height, width, channels) per image, in buffer order.
+/// The space of the `policy` group: one unbounded box of every run of state terms (its
+/// `history` frames one after another) or, with camera terms, a `Dict` of the items of
+/// [`frame_items`], each with a leading axis of `history` frames (oldest first) when the group
+/// stacks more than one: `state` of shape (history, n), an image of shape (history, height,
+/// width, channels), the layout of Gymnasium's frame stacking.
 fn policy_space(g: &Group, dims: &Dims) -> Space {
-    let images = g.terms.iter().any(|t| t.term.term.image().is_some());
-    if !images {
+    if !has_images(g) {
         let dim: usize = g.terms.iter().map(|t| t.term.term.dim(dims)).sum();
         return Space::unbounded(g.history * dim);
     }
+    let items = frame_items(g, dims);
+    if g.history == 1 {
+        return Space::Dict(items);
+    }
+    let stack = |s: Space| match s {
+        Space::Box { low, high, shape } => Space::Box {
+            low: low.repeat(g.history),
+            high: high.repeat(g.history),
+            shape: [&[g.history][..], &shape].concat(),
+        },
+        other => other,
+    };
+    Space::Dict(items.into_iter().map(|(n, s)| (n, stack(s))).collect())
+}
+
+/// Whether a group has camera images (its observation is then a `Dict`).
+fn has_images(g: &Group) -> bool {
+    g.terms.iter().any(|t| t.term.term.image().is_some())
+}
+
+/// The items of one frame of a group with camera images, in buffer order: each run of state
+/// terms (`state`, `state_1`, ...; an unbounded box) and each image (`<camera>_<channels>`, a box
+/// of shape (height, width, channels)).
+fn frame_items(g: &Group, dims: &Dims) -> Vec<(String, Space)> {
     let mut items: Vec<(String, Space)> = Vec::new();
     let mut run = 0usize;
     let mut states = 0usize;
@@ -983,7 +1021,7 @@ fn policy_space(g: &Group, dims: &Dims) -> Space {
         }
     }
     flush(&mut run, &mut items);
-    Space::Dict(items)
+    items
 }
 
 /// The task managers' sets. Other plugins that write `StepSignals` or the observation buffer
@@ -1234,7 +1272,11 @@ fn task_observe(
     mut errors: ResMut<SimErrors>,
 ) {
     let first = tw.clock.episode_steps == 0;
-    let Some(model) = tw.task.as_deref().map(|t| t.model.clone()) else {
+    let Some((model, stacked)) = tw
+        .task
+        .as_deref()
+        .map(|t| (t.model.clone(), t.stacked_items.clone()))
+    else {
         return;
     };
     let result = tw.with_ctx(|task, ctx| -> Result<Vec<Vec<f32>>, String> {
@@ -1286,7 +1328,20 @@ fn task_observe(
         while h.len() > g.history {
             h.pop_front();
         }
-        let flat: Vec<f32> = h.iter().flatten().copied().collect();
+        let flat: Vec<f32> = if stacked[k].is_empty() {
+            h.iter().flatten().copied().collect()
+        } else {
+            // item by item (state, each image), each item's frames oldest first
+            let mut out = Vec::with_capacity(h.iter().map(Vec::len).sum());
+            let mut at = 0;
+            for &len in &stacked[k] {
+                for f in h.iter() {
+                    out.extend_from_slice(&f[at..at + len]);
+                }
+                at += len;
+            }
+            out
+        };
         if g.name == "policy" {
             buffer.0.clone_from(&flat);
         }
