@@ -934,6 +934,8 @@ fn run_scene(
     let mut lengths = Vec::new();
     let mut successes = Vec::new();
     let mut errors = 0u64;
+    // episodes per way of ending (`ended` of the JSON summary)
+    let mut ends: std::collections::BTreeMap<&'static str, u64> = Default::default();
     let mut progress = Progress::new(steps * args.episodes);
     for ep in 0..args.episodes {
         let seed = args.seed.wrapping_add(ep);
@@ -995,6 +997,7 @@ fn run_scene(
         if error.is_some() {
             errors += 1;
         }
+        *ends.entry(end.name()).or_default() += 1;
         let sps = length as f64 / wall.max(1e-12);
         if args.json {
             writeln!(
@@ -1042,7 +1045,8 @@ fn run_scene(
             "{}",
             json!({"summary": true, "target": args.target, "episodes": args.episodes,
                    "success_rate": success_rate, "mean_return": mean_return,
-                   "mean_length": mean_length, "errors": errors, "env_steps_per_s": sps})
+                   "mean_length": mean_length, "errors": errors, "ended": ends,
+                   "env_steps_per_s": sps})
         )
         .map_err(io)?;
     } else {

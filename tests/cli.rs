@@ -116,6 +116,7 @@ fn run_json_prints_one_object_per_episode_and_a_summary() {
     }
     assert_eq!(lines[3]["summary"], true);
     assert_eq!(lines[3]["episodes"], 3);
+    assert_eq!(lines[3]["ended"], serde_json::json!({"steps": 3}));
     assert!(lines[3]["env_steps_per_s"].as_f64().unwrap() > 0.0);
 }
 
