@@ -167,10 +167,11 @@ pub struct Task {
     pub base_height: f64,
     /// Cloth objects (name, entity).
     cloths: Vec<(String, Entity)>,
-    /// Per observation group: the lengths of a frame's items ([`frame_items`]) where the group
-    /// stacks images over more than one frame (its buffer is then item by item, each item's
-    /// frames oldest first); empty otherwise (frame after frame).
-    stacked_items: Arc<Vec<Vec<usize>>>,
+    /// Per observation group: the lengths of a frame's items, in buffer order: the items of
+    /// [`frame_items`] for a group with images, the whole frame otherwise. A group's buffer is
+    /// item by item, each item's `history` frames oldest first (for one item or one frame,
+    /// simply frame after frame).
+    frame_item_lens: Arc<Vec<Vec<usize>>>,
 }
 
 /// Per-env task state (part of the snapshot).
@@ -883,17 +884,17 @@ impl SceneSection for TaskSection {
             held.map_err(|er| serr(&hpath, format!("{} nodes", nodes.len()), er.to_string()))?;
         }
         let stage_slots = n_stages(&points);
-        let stacked_items = model
+        let frame_item_lens = model
             .groups
             .iter()
             .map(|g| {
-                if g.history > 1 && has_images(g) {
+                if has_images(g) {
                     frame_items(g, &dims)
                         .iter()
                         .map(|(_, s)| s.flat_dim())
                         .collect()
                 } else {
-                    Vec::new()
+                    vec![g.terms.iter().map(|t| t.term.term.dim(&dims)).sum()]
                 }
             })
             .collect::<Vec<_>>()
@@ -906,7 +907,7 @@ impl SceneSection for TaskSection {
             leg_joints,
             base_height,
             cloths,
-            stacked_items,
+            frame_item_lens,
         };
         let observation = model
             .groups
@@ -1272,10 +1273,10 @@ fn task_observe(
     mut errors: ResMut<SimErrors>,
 ) {
     let first = tw.clock.episode_steps == 0;
-    let Some((model, stacked)) = tw
+    let Some((model, item_lens)) = tw
         .task
         .as_deref()
-        .map(|t| (t.model.clone(), t.stacked_items.clone()))
+        .map(|t| (t.model.clone(), t.frame_item_lens.clone()))
     else {
         return;
     };
@@ -1328,20 +1329,15 @@ fn task_observe(
         while h.len() > g.history {
             h.pop_front();
         }
-        let flat: Vec<f32> = if stacked[k].is_empty() {
-            h.iter().flatten().copied().collect()
-        } else {
-            // item by item (state, each image), each item's frames oldest first
-            let mut out = Vec::with_capacity(h.iter().map(Vec::len).sum());
-            let mut at = 0;
-            for &len in &stacked[k] {
-                for f in h.iter() {
-                    out.extend_from_slice(&f[at..at + len]);
-                }
-                at += len;
+        // item by item (state, each image), each item's frames oldest first
+        let mut flat = Vec::with_capacity(h.iter().map(Vec::len).sum());
+        let mut at = 0;
+        for &len in &item_lens[k] {
+            for f in h.iter() {
+                flat.extend_from_slice(&f[at..at + len]);
             }
-            out
-        };
+            at += len;
+        }
         if g.name == "policy" {
             buffer.0.clone_from(&flat);
         }
