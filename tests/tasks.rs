@@ -1395,7 +1395,12 @@ fn task_envs_are_bit_identical_on_one_or_two_threads_and_alone() {
     // envs gives the same bits on one thread and on two, and its env 2 the bits of an env run
     // alone with env 2's seed and actions (FEM contact-factor caches, cloth, walking Spot),
     // under changing actions.
-    let action = |k: usize, s: usize| 0.5 * ((s as f32) * 0.1 + k as f32).sin();
+    // step `s`'s actions; `first` is the index of `a[0]` among the batch's values
+    let actions = |a: &mut [f32], first: usize, s: usize| {
+        for (k, x) in a.iter_mut().enumerate() {
+            *x = 0.5 * ((s as f32) * 0.1 + (first + k) as f32).sin();
+        }
+    };
     for id in modesuite::tasks::IMPLEMENTED {
         let run = |threads: usize| -> Vec<u64> {
             let envs = modesuite::cli::envs_for_target(id, None, 3).unwrap();
@@ -1404,9 +1409,7 @@ fn task_envs_are_bit_identical_on_one_or_two_threads_and_alone() {
             let dim = v.envs()[0].spaces().action.flat_dim();
             let mut a = vec![0.0f32; 3 * dim];
             for s in 0..25 {
-                for (k, x) in a.iter_mut().enumerate() {
-                    *x = action(k, s);
-                }
+                actions(&mut a, 0, s);
                 let out = v.step(&a).unwrap();
                 assert!(out.infos.iter().all(|i| i.error.is_none()), "{id}");
             }
@@ -1418,9 +1421,7 @@ fn task_envs_are_bit_identical_on_one_or_two_threads_and_alone() {
         let dim = alone.spaces().action.flat_dim();
         let mut a = vec![0.0f32; dim];
         for s in 0..25 {
-            for (k, x) in a.iter_mut().enumerate() {
-                *x = action(k + 2 * dim, s);
-            }
+            actions(&mut a, 2 * dim, s);
             alone.step(&a);
         }
         println!(
