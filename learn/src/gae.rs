@@ -25,7 +25,7 @@ pub fn gae(
 ) -> (Vec<f32>, Vec<f32>) {
     let len = rewards.len();
     assert!(
-        n > 0 && len % n == 0,
+        n > 0 && len.is_multiple_of(n),
         "rollout length {len} is not a multiple of {n}"
     );
     for (name, l) in [
@@ -39,7 +39,7 @@ pub fn gae(
     assert_eq!(last_values.len(), n, "last_values");
     let steps = len / n;
     let mut adv = vec![0.0f32; len];
-    for i in 0..n {
+    for (i, &last_value) in last_values.iter().enumerate() {
         let mut next_adv = 0.0f32;
         for t in (0..steps).rev() {
             let k = t * n + i;
@@ -50,7 +50,7 @@ pub fn gae(
             } else if t + 1 < steps {
                 (values[k + n], true)
             } else {
-                (last_values[i], true)
+                (last_value, true)
             };
             let delta = rewards[k] + gamma * next_value - values[k];
             let a = if continues {

@@ -31,7 +31,7 @@ impl RunningMeanStd {
 
     /// Statistics of one batch of rows (`data.len()` a multiple of `dim`), two-pass.
     pub fn from_batch(dim: usize, data: &[f32]) -> Self {
-        assert!(dim > 0 && data.len() % dim == 0);
+        assert!(dim > 0 && data.len().is_multiple_of(dim));
         let rows = data.len() / dim;
         let mut mean = vec![0.0f64; dim];
         for row in data.chunks_exact(dim) {
@@ -115,7 +115,7 @@ impl RunningMeanStd {
 
     /// Statistics from [`to_flat`](Self::to_flat)'s numbers.
     pub fn from_flat(flat: &[f64]) -> Option<Self> {
-        if flat.is_empty() || flat.len() % 2 == 0 {
+        if flat.is_empty() || flat.len().is_multiple_of(2) {
             return None;
         }
         let dim = (flat.len() - 1) / 2;
@@ -181,8 +181,8 @@ mod tests {
         let mut b = RunningMeanStd::new(dim);
         b.update(&data[400 * dim..]);
         a.merge(&b);
-        for d in 0..dim {
-            assert!((a.var[d] - var[d]).abs() <= 1e-9 * var[d]);
+        for (got, want) in a.var.iter().zip(&var) {
+            assert!((got - want).abs() <= 1e-9 * want);
         }
         let back = RunningMeanStd::from_flat(&a.to_flat()).unwrap();
         assert_eq!(back, a);
