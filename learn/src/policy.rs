@@ -1,0 +1,262 @@
+//! Trained policies as files: `policy.json` (what the network is, how observations are
+//! normalised, the action bounds, where it came from) and `weights.bpk` (burnpack), and
+//! [`Policy`], which loads them and acts deterministically (the mean action).
+
+use burn::module::Module;
+use burn::tensor::Device;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+use crate::checkpoint::{write_atomic, Identity};
+use crate::config::{PpoConfig, SacConfig};
+use crate::nets::Activation;
+use crate::normalize::RunningMeanStd;
+use crate::ppo::{load_record, record_bytes, ActorCritic, NORM_EPS};
+use crate::rng::Rng;
+use crate::runner::{rescale, EnvShape};
+use crate::sac::SacActor;
+use crate::tensors::{tensor2, to_vec};
+use crate::LearnError;
+
+/// Version of the policy files' layout.
+pub const POLICY_FORMAT_VERSION: u32 = 1;
+
+/// Observation normalisation of a policy.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObsNorm {
+    /// Mean per dimension.
+    pub mean: Vec<f64>,
+    /// Variance per dimension.
+    pub var: Vec<f64>,
+    /// Added to the variance under the square root.
+    pub eps: f64,
+    /// Normalised values are clipped to +-this.
+    pub clip: f64,
+}
+
+/// The contents of `policy.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicyMeta {
+    /// [`POLICY_FORMAT_VERSION`] at writing.
+    pub format_version: u32,
+    /// `"ppo"` or `"sac"`.
+    pub algo: String,
+    /// The environment's identity string.
+    pub env: String,
+    /// Observation length.
+    pub obs_dim: usize,
+    /// Action length.
+    pub act_dim: usize,
+    /// Lower action bounds.
+    pub low: Vec<f32>,
+    /// Upper action bounds.
+    pub high: Vec<f32>,
+    /// Hidden widths.
+    pub hidden: Vec<usize>,
+    /// Hidden nonlinearity.
+    pub activation: Activation,
+    /// PPO: separate actor and critic trunks.
+    pub separate: bool,
+    /// Observation normalisation, if any.
+    pub obs_norm: Option<ObsNorm>,
+    /// Training iterations behind the weights.
+    pub iteration: u64,
+    /// Environment steps behind the weights.
+    pub env_steps: u64,
+    /// The training configuration (RON).
+    pub config_ron: String,
+    /// Free text from the run (the command that made it, say).
+    pub note: String,
+}
+
+enum Net {
+    Ppo(ActorCritic),
+    Sac(SacActor),
+}
+
+/// A trained policy, loaded from its folder.
+pub struct Policy {
+    meta: PolicyMeta,
+    net: Net,
+    device: Device,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn write(dir: &Path, meta: &PolicyMeta, weights: Vec<u8>) -> Result<(), LearnError> {
+    write_atomic(&dir.join("weights.bpk"), &weights)?;
+    let json = serde_json::to_string_pretty(meta).map_err(|e| LearnError::Io(e.to_string()))?;
+    write_atomic(&dir.join("policy.json"), json.as_bytes())
+}
+
+fn obs_norm(rms: Option<&RunningMeanStd>, clip: f64) -> Option<ObsNorm> {
+    rms.map(|r| ObsNorm {
+        mean: r.mean.clone(),
+        var: r.var.clone(),
+        eps: NORM_EPS,
+        clip,
+    })
+}
+
+/// Writes a PPO policy.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn export_ppo(
+    dir: &Path,
+    model: &ActorCritic,
+    cfg: &PpoConfig,
+    shape: &EnvShape,
+    rms: Option<&RunningMeanStd>,
+    identity: &Identity,
+    iteration: u64,
+    env_steps: u64,
+    note: &str,
+) -> Result<(), LearnError> {
+    let meta = PolicyMeta {
+        format_version: POLICY_FORMAT_VERSION,
+        algo: "ppo".into(),
+        env: identity.env.clone(),
+        obs_dim: shape.obs_dim,
+        act_dim: shape.act_dim,
+        low: shape.low.clone(),
+        high: shape.high.clone(),
+        hidden: cfg.hidden.clone(),
+        activation: cfg.activation,
+        separate: cfg.separate,
+        obs_norm: obs_norm(rms, cfg.obs_clip as f64),
+        iteration,
+        env_steps,
+        config_ron: crate::config::AlgoConfig::Ppo(cfg.clone()).to_ron(),
+        note: note.to_string(),
+    };
+    write(dir, &meta, record_bytes(model.valid())?)
+}
+
+/// Writes a SAC policy (the actor).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn export_sac(
+    dir: &Path,
+    actor: &SacActor,
+    cfg: &SacConfig,
+    shape: &EnvShape,
+    identity: &Identity,
+    iteration: u64,
+    env_steps: u64,
+    note: &str,
+) -> Result<(), LearnError> {
+    let meta = PolicyMeta {
+        format_version: POLICY_FORMAT_VERSION,
+        algo: "sac".into(),
+        env: identity.env.clone(),
+        obs_dim: shape.obs_dim,
+        act_dim: shape.act_dim,
+        low: shape.low.clone(),
+        high: shape.high.clone(),
+        hidden: cfg.hidden.clone(),
+        activation: cfg.activation,
+        separate: false,
+        obs_norm: None,
+        iteration,
+        env_steps,
+        config_ron: crate::config::AlgoConfig::Sac(cfg.clone()).to_ron(),
+        note: note.to_string(),
+    };
+    write(dir, &meta, record_bytes(actor.valid())?)
+}
+
+impl Policy {
+    /// Loads a policy from its folder (holding `policy.json`) or from a run folder (holding
+    /// `policy/policy.json`).
+    pub fn load(dir: impl AsRef<Path>) -> Result<Self, LearnError> {
+        let dir = dir.as_ref();
+        let dir = if dir.join("policy.json").exists() {
+            dir.to_path_buf()
+        } else {
+            dir.join("policy")
+        };
+        let meta_path = dir.join("policy.json");
+        let text = std::fs::read_to_string(&meta_path)
+            .map_err(|e| LearnError::Io(format!("{}: {e}", meta_path.display())))?;
+        let meta: PolicyMeta = serde_json::from_str(&text)
+            .map_err(|e| LearnError::Checkpoint(format!("{}: {e}", meta_path.display())))?;
+        if meta.format_version != POLICY_FORMAT_VERSION {
+            return Err(LearnError::Incompatible(format!(
+                "{}: policy format version {}, this build reads version {POLICY_FORMAT_VERSION}",
+                meta_path.display(),
+                meta.format_version
+            )));
+        }
+        let w_path = dir.join("weights.bpk");
+        let weights = std::fs::read(&w_path)
+            .map_err(|e| LearnError::Io(format!("{}: {e}", w_path.display())))?;
+        let device = Device::flex();
+        let mut rng = Rng::new(0);
+        let net = match meta.algo.as_str() {
+            "ppo" => {
+                let cfg = PpoConfig {
+                    hidden: meta.hidden.clone(),
+                    activation: meta.activation,
+                    separate: meta.separate,
+                    ..PpoConfig::default()
+                };
+                let m = ActorCritic::new(&mut rng, meta.obs_dim, meta.act_dim, &cfg, &device);
+                Net::Ppo(load_record(m, &weights)?)
+            }
+            "sac" => {
+                let cfg = SacConfig {
+                    hidden: meta.hidden.clone(),
+                    activation: meta.activation,
+                    ..SacConfig::default()
+                };
+                let m = SacActor::new(&mut rng, meta.obs_dim, meta.act_dim, &cfg, &device);
+                Net::Sac(load_record(m, &weights)?)
+            }
+            other => {
+                return Err(LearnError::Incompatible(format!(
+                    "unknown policy algorithm '{other}'"
+                )));
+            }
+        };
+        Ok(Policy { meta, net, device })
+    }
+
+    /// What the policy is.
+    pub fn meta(&self) -> &PolicyMeta {
+        &self.meta
+    }
+
+    /// Observation length.
+    pub fn obs_dim(&self) -> usize {
+        self.meta.obs_dim
+    }
+
+    /// Action length.
+    pub fn act_dim(&self) -> usize {
+        self.meta.act_dim
+    }
+
+    /// Deterministic (mean) actions in the environment's units for one or more observations
+    /// (`obs.len()` a multiple of `obs_dim`; one row of `act_dim` actions each).
+    pub fn act(&self, obs: &[f32]) -> Vec<f32> {
+        let od = self.meta.obs_dim;
+        assert!(
+            !obs.is_empty() && obs.len().is_multiple_of(od),
+            "Policy::act: {} values is not a positive multiple of obs_dim {od}",
+            obs.len()
+        );
+        let rows = obs.len() / od;
+        let mut o = obs.to_vec();
+        if let Some(n) = &self.meta.obs_norm {
+            for row in o.chunks_exact_mut(od) {
+                for (d, x) in row.iter_mut().enumerate() {
+                    let z = (*x as f64 - n.mean[d]) / (n.var[d] + n.eps).sqrt();
+                    *x = z.clamp(-n.clip, n.clip) as f32;
+                }
+            }
+        }
+        let x = tensor2(&o, rows, od, &self.device);
+        let a = match &self.net {
+            Net::Ppo(m) => to_vec(m.mean(x)),
+            Net::Sac(m) => to_vec(m.mean_action(x)),
+        };
+        rescale(&a, &self.meta.low, &self.meta.high)
+    }
+}

@@ -1,0 +1,445 @@
+//! Learning, determinism and resume tests on the crate's own small environments.
+//!
+//! Thresholds are stated next to each test; the measured values are printed beside them
+//! (`cargo test -p modesuite-learn -- --nocapture`).
+
+use modesuite_learn::checkpoint::Checkpoint;
+use modesuite_learn::envs::{Pendulum, PointReach};
+use modesuite_learn::{
+    evaluate, read_metrics, train, AlgoConfig, Control, Metrics, Policy, PpoConfig, RunOptions,
+    SacConfig, Silent, VecEnvironment,
+};
+use std::path::PathBuf;
+use std::time::Instant;
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mslearn-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// PPO settings for the point-mass reach: the defaults (256-128-64 ELU network, rl_games'
+/// Isaac Lab values) with a smaller rollout and minibatch.
+fn ppo_reach(seed: u64) -> AlgoConfig {
+    AlgoConfig::Ppo(PpoConfig {
+        seed,
+        horizon: 32,
+        minibatch_size: 256,
+        mini_epochs: 5,
+        ..PpoConfig::default()
+    })
+}
+
+/// SAC settings for the pendulum.
+fn sac_pendulum(seed: u64) -> AlgoConfig {
+    AlgoConfig::Sac(SacConfig {
+        seed,
+        hidden: vec![64, 64],
+        batch_size: 128,
+        learning_starts: 1000,
+        steps_per_iteration: 500,
+        actor_lr: 1e-3,
+        critic_lr: 1e-3,
+        alpha_lr: 1e-3,
+        ..SacConfig::default()
+    })
+}
+
+/// Point-mass reach PPO: after 120,000 env steps (16 envs) the deterministic policy must
+/// succeed in at least 95 % of 200 held-out episodes with a mean return within 25 % of the
+/// hand-tuned PD controller's. Two runs with the same seed must end with identical
+/// parameters.
+#[test]
+fn ppo_solves_point_reach_deterministically() {
+    let steps = 120_000;
+    let mut hashes = Vec::new();
+    let mut dirs = Vec::new();
+    for run in 0..2 {
+        let dir = tmp(&format!("ppo-reach-{run}"));
+        let mut env = PointReach::new(16);
+        let start = Instant::now();
+        let mut opts = RunOptions::new(&dir, steps);
+        opts.checkpoint_every = 0;
+        let s = train(&ppo_reach(1), &mut env, &opts, &mut Silent).unwrap();
+        let secs = start.elapsed().as_secs_f64();
+        let last = s.last.clone().unwrap();
+        println!(
+            "ppo reach run {run}: {} updates, {} env steps in {secs:.1} s ({:.0} steps/s, {:.2} updates/s); last training return {:.2}, success {:?}, hash {:016x}",
+            s.iterations,
+            s.env_steps,
+            s.env_steps as f64 / secs,
+            s.iterations as f64 / secs,
+            last.return_mean.unwrap_or(f64::NAN),
+            last.success_rate,
+            s.param_hash
+        );
+        hashes.push(s.param_hash);
+        dirs.push(dir);
+    }
+    assert_eq!(hashes[0], hashes[1], "same seed, different parameters");
+
+    let policy = Policy::load(&dirs[0]).unwrap();
+    let mut env = PointReach::new(16);
+    let learned = evaluate(&mut env, 200, 10_000, |o| policy.act(o));
+    let reference = evaluate(&mut env, 200, 10_000, PointReach::pd_action);
+    let threshold = reference.return_mean() * 1.25;
+    println!(
+        "ppo reach eval (200 episodes, seed 10000): success {:.3} (threshold 0.95), return {:.3} (threshold {threshold:.3}; PD controller {:.3}, success {:.3})",
+        learned.success_rate().unwrap(),
+        learned.return_mean(),
+        reference.return_mean(),
+        reference.success_rate().unwrap()
+    );
+    assert!(learned.success_rate().unwrap() >= 0.95);
+    assert!(learned.return_mean() >= threshold);
+    for d in dirs {
+        std::fs::remove_dir_all(d).unwrap();
+    }
+}
+
+/// Pendulum SAC: after 12,000 env steps (one env) the deterministic policy's mean return over
+/// 20 held-out episodes must be at least -250 (a random policy scores about -1200). Two runs
+/// with the same seed must end with identical parameters.
+#[test]
+fn sac_solves_pendulum_deterministically() {
+    let steps = 12_000;
+    let mut hashes = Vec::new();
+    let mut dirs = Vec::new();
+    for run in 0..2 {
+        let dir = tmp(&format!("sac-pendulum-{run}"));
+        let mut env = Pendulum::new(1);
+        let start = Instant::now();
+        let mut opts = RunOptions::new(&dir, steps);
+        opts.checkpoint_every = 0;
+        let s = train(&sac_pendulum(3), &mut env, &opts, &mut Silent).unwrap();
+        let secs = start.elapsed().as_secs_f64();
+        let last = s.last.clone().unwrap();
+        println!(
+            "sac pendulum run {run}: {} env steps in {secs:.1} s ({:.0} steps/s with one gradient step each); last training return {:.1}, alpha {:.4}, hash {:016x}",
+            s.env_steps,
+            s.env_steps as f64 / secs,
+            last.return_mean.unwrap_or(f64::NAN),
+            last.alpha.unwrap(),
+            s.param_hash
+        );
+        hashes.push(s.param_hash);
+        dirs.push(dir);
+    }
+    assert_eq!(hashes[0], hashes[1], "same seed, different parameters");
+    let policy = Policy::load(&dirs[0]).unwrap();
+    let mut env = Pendulum::new(4);
+    let learned = evaluate(&mut env, 20, 20_000, |o| policy.act(o));
+    let random = evaluate(&mut env, 20, 20_000, |o| {
+        o.iter().step_by(3).map(|_| 0.0).collect()
+    });
+    println!(
+        "sac pendulum eval (20 episodes, seed 20000): return {:.1} (threshold -250; zero torque {:.1})",
+        learned.return_mean(),
+        random.return_mean()
+    );
+    assert!(learned.return_mean() >= -250.0);
+    for d in dirs {
+        std::fs::remove_dir_all(d).unwrap();
+    }
+}
+
+/// Hides `save_state`, so the trainer falls back to resetting the environments at each
+/// checkpoint.
+struct Stateless<E>(E);
+
+impl<E: VecEnvironment> VecEnvironment for Stateless<E> {
+    fn num_envs(&self) -> usize {
+        self.0.num_envs()
+    }
+    fn obs_dim(&self) -> usize {
+        self.0.obs_dim()
+    }
+    fn act_dim(&self) -> usize {
+        self.0.act_dim()
+    }
+    fn action_bounds(&self) -> (Vec<f32>, Vec<f32>) {
+        self.0.action_bounds()
+    }
+    fn identity(&self) -> String {
+        self.0.identity()
+    }
+    fn reset(&mut self, seed: u64) -> Vec<f32> {
+        self.0.reset(seed)
+    }
+    fn step(&mut self, actions: &[f32]) -> modesuite_learn::BatchStep {
+        self.0.step(actions)
+    }
+}
+
+fn comparable(m: &[Metrics]) -> Vec<Metrics> {
+    m.iter()
+        .map(|m| Metrics {
+            wall_s: 0.0,
+            steps_per_s: 0.0,
+            ..m.clone()
+        })
+        .collect()
+}
+
+/// Trains `total` steps uninterrupted, and again interrupted after `stop_at` iterations and
+/// resumed from the checkpoint by a fresh learner and environment; both must end with
+/// bit-identical parameters, learner state and metrics.
+///
+/// `kill` false: the run is stopped gracefully (it writes a checkpoint at `stop_at`).
+/// `kill` true: as if killed (-9) after iteration `stop_at` wrote its metrics line: the
+/// folder is left with the last periodic checkpoint, so the resumed run redoes iterations.
+#[allow(clippy::too_many_arguments)]
+fn resume_matches<E: VecEnvironment>(
+    name: &str,
+    cfg: &AlgoConfig,
+    make: impl Fn() -> E,
+    total: u64,
+    every: u64,
+    stop_at: u64,
+    kill: bool,
+) {
+    let a = tmp(&format!("{name}-a"));
+    let b = tmp(&format!("{name}-b"));
+    let opts = |dir: &PathBuf| RunOptions {
+        checkpoint_every: every,
+        ..RunOptions::new(dir, total)
+    };
+    let full = train(cfg, &mut make(), &opts(&a), &mut Silent).unwrap();
+    let mut last_periodic = None;
+    let ckpt = b.join("checkpoint.bin");
+    let mut stopper = |m: &Metrics| {
+        if m.iteration == stop_at {
+            last_periodic = std::fs::read(&ckpt).ok();
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    };
+    let first = train(cfg, &mut make(), &opts(&b), &mut stopper).unwrap();
+    assert!(first.stopped && first.iterations == stop_at);
+    if kill {
+        std::fs::write(
+            &ckpt,
+            last_periodic.expect("a periodic checkpoint before the kill"),
+        )
+        .unwrap();
+    } else {
+        // An unfinished metrics line, as a run killed after writing it would leave: resuming
+        // drops it.
+        let extra = serde_json::to_string(&Metrics {
+            iteration: stop_at + 1,
+            ..Default::default()
+        })
+        .unwrap();
+        let text = std::fs::read_to_string(b.join("metrics.jsonl")).unwrap();
+        std::fs::write(b.join("metrics.jsonl"), text + &extra + "\n").unwrap();
+    }
+    let rest = train(cfg, &mut make(), &opts(&b), &mut Silent).unwrap();
+    assert!(rest.resumed);
+    println!(
+        "{name}: uninterrupted {:016x}, resumed at iteration {stop_at} {:016x}",
+        full.param_hash, rest.param_hash
+    );
+    let ma = comparable(&read_metrics(&a.join("metrics.jsonl")).unwrap());
+    let mb = comparable(&read_metrics(&b.join("metrics.jsonl")).unwrap());
+    for (x, y) in ma.iter().zip(&mb) {
+        assert_eq!(x, y, "first differing metrics line");
+    }
+    assert_eq!(ma.len(), mb.len());
+    assert_eq!(full.param_hash, rest.param_hash);
+    assert_eq!(full.env_steps, rest.env_steps);
+    // Learner state that must match bit for bit (the trained parameters are in the hash;
+    // optimiser moments show up in it through the updates after the resume).
+    let ca = Checkpoint::load(&a.join("checkpoint.bin")).unwrap();
+    let cb = Checkpoint::load(&b.join("checkpoint.bin")).unwrap();
+    for section in [
+        "rng",
+        "obs",
+        "ep_ret",
+        "ep_len",
+        "obs_rms",
+        "value_rms",
+        "replay.obs",
+        "replay.act",
+        "replay.rew",
+        "replay.next",
+        "replay.term",
+        "replay.meta",
+        "env_state",
+    ] {
+        if ca.has(section) || cb.has(section) {
+            assert_eq!(
+                ca.bytes(section).unwrap(),
+                cb.bytes(section).unwrap(),
+                "section {section}"
+            );
+        }
+    }
+    std::fs::remove_dir_all(a).unwrap();
+    std::fs::remove_dir_all(b).unwrap();
+}
+
+#[test]
+fn ppo_resume_is_bit_identical() {
+    let cfg = AlgoConfig::Ppo(PpoConfig {
+        hidden: vec![32, 32],
+        horizon: 16,
+        minibatch_size: 64,
+        mini_epochs: 3,
+        ..PpoConfig::default()
+    });
+    resume_matches(
+        "ppo-resume",
+        &cfg,
+        || PointReach::new(8),
+        8 * 16 * 7,
+        2,
+        3,
+        false,
+    );
+    resume_matches(
+        "ppo-resume-killed",
+        &cfg,
+        || PointReach::new(8),
+        8 * 16 * 7,
+        2,
+        3,
+        true,
+    );
+    // Environments that cannot save their state are reset at every checkpoint instead.
+    resume_matches(
+        "ppo-resume-stateless",
+        &cfg,
+        || Stateless(PointReach::new(8)),
+        8 * 16 * 7,
+        2,
+        3,
+        true,
+    );
+}
+
+#[test]
+fn sac_resume_is_bit_identical() {
+    let cfg = AlgoConfig::Sac(SacConfig {
+        hidden: vec![32, 32],
+        batch_size: 32,
+        learning_starts: 100,
+        steps_per_iteration: 50,
+        ..SacConfig::default()
+    });
+    resume_matches(
+        "sac-resume",
+        &cfg,
+        || Pendulum::new(2),
+        2 * 50 * 5,
+        2,
+        3,
+        false,
+    );
+    resume_matches(
+        "sac-resume-killed",
+        &cfg,
+        || Pendulum::new(2),
+        2 * 50 * 5,
+        2,
+        3,
+        true,
+    );
+}
+
+#[test]
+fn resume_refuses_another_environment_or_configuration() {
+    let dir = tmp("refuse");
+    let cfg = AlgoConfig::Ppo(PpoConfig {
+        hidden: vec![8],
+        horizon: 4,
+        minibatch_size: 16,
+        ..PpoConfig::default()
+    });
+    train(
+        &cfg,
+        &mut PointReach::new(4),
+        &RunOptions::new(&dir, 32),
+        &mut Silent,
+    )
+    .unwrap();
+    let e = train(
+        &cfg,
+        &mut PointReach::new(3),
+        &RunOptions::new(&dir, 64),
+        &mut Silent,
+    )
+    .unwrap_err();
+    assert!(format!("{e}").contains("another run"), "{e}");
+    let sac = AlgoConfig::Sac(SacConfig::default());
+    let e = train(
+        &sac,
+        &mut PointReach::new(4),
+        &RunOptions::new(&dir, 64),
+        &mut Silent,
+    )
+    .unwrap_err();
+    assert!(format!("{e}").contains("written by ppo"), "{e}");
+    let mut other = cfg.clone();
+    other.set_seed(9);
+    let e = train(
+        &other,
+        &mut PointReach::new(4),
+        &RunOptions::new(&dir, 64),
+        &mut Silent,
+    )
+    .unwrap_err();
+    assert!(format!("{e}").contains("configuration differs"), "{e}");
+    let e = train(
+        &cfg,
+        &mut PointReach::new(4),
+        &RunOptions {
+            resume: false,
+            ..RunOptions::new(&dir, 64)
+        },
+        &mut Silent,
+    )
+    .unwrap_err();
+    assert!(format!("{e}").contains("already holds a checkpoint"), "{e}");
+    // The saved configuration resumes the run.
+    let s = train(
+        &modesuite_learn::run_config(&dir).unwrap(),
+        &mut PointReach::new(4),
+        &RunOptions::new(&dir, 64),
+        &mut Silent,
+    )
+    .unwrap();
+    assert!(s.resumed && s.env_steps == 64);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn policy_acts_deterministically_and_matches_the_learner() {
+    let dir = tmp("policy");
+    let cfg = PpoConfig {
+        hidden: vec![16, 16],
+        horizon: 8,
+        minibatch_size: 32,
+        ..PpoConfig::default()
+    };
+    let mut env = PointReach::new(4);
+    let mut ppo = modesuite_learn::ppo::Ppo::new(&cfg, &mut env).unwrap();
+    let mut opts = RunOptions::new(&dir, 4 * 8 * 3);
+    opts.note = "test policy".into();
+    modesuite_learn::runner::run(&mut ppo, &mut env, &opts, &mut Silent).unwrap();
+    let p = Policy::load(&dir).unwrap();
+    assert_eq!(p.meta().note, "test policy");
+    assert_eq!((p.obs_dim(), p.act_dim()), (4, 2));
+    let obs = [0.5, -0.3, 0.1, 0.0, -1.0, 1.0, 0.0, 0.2];
+    let a1 = p.act(&obs);
+    assert_eq!(a1, p.act(&obs));
+    assert_eq!(a1.len(), 4);
+    let direct = ppo.act_deterministic(&obs);
+    for (x, y) in a1.iter().zip(&direct) {
+        assert!((x - y).abs() < 1e-6, "{a1:?} vs {direct:?}");
+    }
+    assert!(a1.iter().all(|x| (-1.0..=1.0).contains(x)));
+    // The policy folder itself loads too.
+    assert_eq!(Policy::load(dir.join("policy")).unwrap().act(&obs), a1);
+    std::fs::remove_dir_all(dir).unwrap();
+}
