@@ -83,4 +83,7 @@ pub enum LearnError {
     /// The environment broke its contract (wrong lengths, non-finite values).
     #[error("environment: {0}")]
     Env(String),
+    /// A loss became NaN or infinite; no checkpoint is written from such a state.
+    #[error("training diverged: {0}")]
+    Diverged(String),
 }

@@ -260,3 +260,14 @@ impl Policy {
         rescale(&a, &self.meta.low, &self.meta.high)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn policy_can_be_shared_between_threads() {
+        fn send_sync<T: Send + Sync>() {}
+        send_sync::<Policy>();
+    }
+}

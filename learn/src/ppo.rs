@@ -294,7 +294,7 @@ impl Ppo {
         v
     }
 
-    fn update(&mut self, r: Rollout, m: &mut Metrics) {
+    fn update(&mut self, r: Rollout, m: &mut Metrics) -> Result<(), LearnError> {
         let (n, od, ad) = (self.shape.n, self.shape.obs_dim, self.shape.act_dim);
         let cfg = self.cfg.clone();
         let last = self.last_values();
@@ -417,6 +417,15 @@ impl Ppo {
                 count += 1;
             }
         }
+        if ![sum_a, sum_c, sum_e, sum_b, sum_kl]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err(LearnError::Diverged(format!(
+                "ppo iteration {}: actor loss {sum_a}, critic loss {sum_c}, kl {sum_kl}",
+                self.iteration + 1
+            )));
+        }
         let c = count.max(1) as f64;
         m.actor_loss = Some(sum_a / c);
         m.critic_loss = Some(sum_c / c);
@@ -426,6 +435,7 @@ impl Ppo {
         m.clip_fraction = Some(sum_clip / c);
         m.grad_norm = cfg.grad_norm.map(|_| sum_gn / c);
         m.lr = Some(self.lr);
+        Ok(())
     }
 
     /// Runs one iteration: a rollout of `horizon` steps and the update on it.
@@ -437,7 +447,7 @@ impl Ppo {
             algo: "ppo".into(),
             ..Default::default()
         };
-        self.update(rollout, &mut m);
+        self.update(rollout, &mut m)?;
         self.iteration += 1;
         let dt = start.elapsed().as_secs_f64();
         self.wall_s += dt;
@@ -590,8 +600,15 @@ mod tests {
 
     #[test]
     fn first_minibatch_has_ratio_one_and_no_clipping() {
+        for separate in [false, true] {
+            first_minibatch_check(separate);
+        }
+    }
+
+    fn first_minibatch_check(separate: bool) {
         let cfg = PpoConfig {
             hidden: vec![32, 32],
+            separate,
             horizon: 16,
             minibatch_size: 64,
             mini_epochs: 2,
@@ -603,7 +620,7 @@ mod tests {
             let m = ppo.iterate(&mut env).unwrap();
             let u = &ppo.last_update;
             println!(
-                "iteration {it}: first minibatch max |ratio - 1| = {:e}, clip fraction {}, later kl {:?}",
+                "separate {separate}, iteration {it}: first minibatch max |ratio - 1| = {:e}, clip fraction {}, later kl {:?}",
                 u.first_minibatch_max_ratio_deviation, u.first_minibatch_clip_fraction, m.approx_kl
             );
             assert_eq!(u.first_minibatch_max_ratio_deviation, 0.0);

@@ -508,6 +508,15 @@ impl Sac {
             alpha: Some(self.alpha() as f64),
             ..Default::default()
         };
+        if ![sums.actor, sums.critic, sums.q, m.alpha.unwrap_or(0.0)]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err(LearnError::Diverged(format!(
+                "sac iteration {}: actor loss {}, critic loss {}, alpha {:?}",
+                self.iteration, sums.actor, sums.critic, m.alpha
+            )));
+        }
         if sums.n > 0 {
             let c = sums.n as f64;
             m.actor_loss = Some(sums.actor / c);

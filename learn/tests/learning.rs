@@ -443,3 +443,53 @@ fn policy_acts_deterministically_and_matches_the_learner() {
     assert_eq!(Policy::load(dir.join("policy")).unwrap().act(&obs), a1);
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// Rewards of 1e30 overflow an unnormalised value loss: training stops with an error and
+/// writes no checkpoint from the poisoned state.
+#[test]
+fn divergence_is_an_error_not_a_checkpoint() {
+    struct Huge(PointReach);
+    impl VecEnvironment for Huge {
+        fn num_envs(&self) -> usize {
+            self.0.num_envs()
+        }
+        fn obs_dim(&self) -> usize {
+            4
+        }
+        fn act_dim(&self) -> usize {
+            2
+        }
+        fn action_bounds(&self) -> (Vec<f32>, Vec<f32>) {
+            self.0.action_bounds()
+        }
+        fn identity(&self) -> String {
+            "huge".into()
+        }
+        fn reset(&mut self, seed: u64) -> Vec<f32> {
+            self.0.reset(seed)
+        }
+        fn step(&mut self, actions: &[f32]) -> modesuite_learn::BatchStep {
+            let mut s = self.0.step(actions);
+            s.rewards.iter_mut().for_each(|r| *r = 1e30);
+            s
+        }
+    }
+    let dir = tmp("diverge");
+    let cfg = AlgoConfig::Ppo(PpoConfig {
+        hidden: vec![8],
+        horizon: 4,
+        minibatch_size: 16,
+        normalize_value: false,
+        ..PpoConfig::default()
+    });
+    let e = train(
+        &cfg,
+        &mut Huge(PointReach::new(4)),
+        &RunOptions::new(&dir, 64),
+        &mut Silent,
+    )
+    .unwrap_err();
+    assert!(matches!(e, modesuite_learn::LearnError::Diverged(_)), "{e}");
+    assert!(!dir.join("checkpoint.bin").exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}
