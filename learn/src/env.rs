@@ -32,7 +32,8 @@ pub trait VecEnvironment {
     fn obs_dim(&self) -> usize;
     /// Length of one action.
     fn act_dim(&self) -> usize;
-    /// Lower and upper action bounds, each `act_dim` long (both finite).
+    /// Lower and upper action bounds, each `act_dim` long. Learners produce actions in
+    /// [-1, 1] and map them linearly onto these bounds; an infinite bound counts as -1 or +1.
     fn action_bounds(&self) -> (Vec<f32>, Vec<f32>);
     /// A string naming the task and its interface (for example its id and dimensions).
     /// Checkpoints record it and refuse to resume against an environment with another.

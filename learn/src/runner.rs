@@ -23,9 +23,16 @@ pub struct EnvShape {
 }
 
 impl EnvShape {
-    /// Reads and checks an environment's dimensions and bounds.
+    /// Reads and checks an environment's dimensions and bounds. An infinite bound is taken as
+    /// -1 or +1 (Isaac Lab's rl_games wrapper clips such actions to +-1 the same way).
     pub fn of(env: &dyn VecEnvironment) -> Result<Self, LearnError> {
-        let (low, high) = env.action_bounds();
+        let (mut low, mut high) = env.action_bounds();
+        low.iter_mut()
+            .filter(|l| **l == f32::NEG_INFINITY)
+            .for_each(|l| *l = -1.0);
+        high.iter_mut()
+            .filter(|h| **h == f32::INFINITY)
+            .for_each(|h| *h = 1.0);
         let s = EnvShape {
             n: env.num_envs(),
             obs_dim: env.obs_dim(),
@@ -48,9 +55,10 @@ impl EnvShape {
             .zip(&s.high)
             .any(|(l, h)| !(l.is_finite() && h.is_finite() && l < h))
         {
-            return Err(LearnError::Env(
-                "action bounds must be finite with low < high".into(),
-            ));
+            return Err(LearnError::Env(format!(
+                "action bounds must be numbers with low < high (infinities count as -1 and +1): {:?} {:?}",
+                s.low, s.high
+            )));
         }
         Ok(s)
     }
@@ -301,4 +309,57 @@ pub fn run(
         last,
         param_hash: t.param_hash(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::envs::PointReach;
+
+    struct Bounds(PointReach, Vec<f32>, Vec<f32>);
+    impl VecEnvironment for Bounds {
+        fn num_envs(&self) -> usize {
+            1
+        }
+        fn obs_dim(&self) -> usize {
+            4
+        }
+        fn act_dim(&self) -> usize {
+            2
+        }
+        fn action_bounds(&self) -> (Vec<f32>, Vec<f32>) {
+            (self.1.clone(), self.2.clone())
+        }
+        fn identity(&self) -> String {
+            String::new()
+        }
+        fn reset(&mut self, seed: u64) -> Vec<f32> {
+            self.0.reset(seed)
+        }
+        fn step(&mut self, a: &[f32]) -> BatchStep {
+            self.0.step(a)
+        }
+    }
+
+    #[test]
+    fn bounds_rescaling_and_infinities() {
+        let env = Bounds(
+            PointReach::new(1),
+            vec![f32::NEG_INFINITY, 0.0],
+            vec![f32::INFINITY, 4.0],
+        );
+        let s = EnvShape::of(&env).unwrap();
+        assert_eq!(
+            (s.low.clone(), s.high.clone()),
+            (vec![-1.0, 0.0], vec![1.0, 4.0])
+        );
+        assert_eq!(
+            rescale(&[0.5, 0.5, -3.0, 2.0], &s.low, &s.high),
+            vec![0.5, 3.0, -1.0, 4.0]
+        );
+        let bad = Bounds(PointReach::new(1), vec![f32::NAN, 0.0], vec![1.0, 4.0]);
+        assert!(EnvShape::of(&bad).is_err());
+        let bad = Bounds(PointReach::new(1), vec![2.0, 0.0], vec![f32::INFINITY, 4.0]);
+        assert!(EnvShape::of(&bad).is_err());
+    }
 }

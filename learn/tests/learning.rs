@@ -30,7 +30,9 @@ fn ppo_reach(seed: u64) -> AlgoConfig {
     })
 }
 
-/// SAC settings for the pendulum.
+/// SAC settings for the pendulum: a 64-64 network, learning rates 1e-3 and Polyak 0.01 (with
+/// 0.005, one seed of seven, seed 5, still failed to swing up from some starts at 12,000 steps;
+/// with 0.01 seeds 3 to 9 all scored -161 to -165).
 fn sac_pendulum(seed: u64) -> AlgoConfig {
     AlgoConfig::Sac(SacConfig {
         seed,
@@ -41,6 +43,7 @@ fn sac_pendulum(seed: u64) -> AlgoConfig {
         actor_lr: 1e-3,
         critic_lr: 1e-3,
         alpha_lr: 1e-3,
+        tau: 0.01,
         ..SacConfig::default()
     })
 }
@@ -492,4 +495,51 @@ fn divergence_is_an_error_not_a_checkpoint() {
     assert!(matches!(e, modesuite_learn::LearnError::Diverged(_)), "{e}");
     assert!(!dir.join("checkpoint.bin").exists());
     std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// The two learning tests' settings on other seeds (not run in CI: about 1.5 minutes).
+#[test]
+#[ignore]
+fn learning_on_other_seeds() {
+    for seed in [2, 3, 4] {
+        let dir = tmp(&format!("ppo-seed-{seed}"));
+        let mut opts = RunOptions::new(&dir, 120_000);
+        opts.checkpoint_every = 0;
+        train(
+            &ppo_reach(seed),
+            &mut PointReach::new(16),
+            &opts,
+            &mut Silent,
+        )
+        .unwrap();
+        let p = Policy::load(&dir).unwrap();
+        let e = evaluate(&mut PointReach::new(16), 200, 10_000, |o| p.act(o));
+        println!(
+            "ppo reach seed {seed}: success {:.3} (threshold 0.95), return {:.3} (threshold -12.910)",
+            e.success_rate().unwrap(),
+            e.return_mean()
+        );
+        assert!(e.success_rate().unwrap() >= 0.95 && e.return_mean() >= -12.91);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+    for seed in [4, 5, 6] {
+        let dir = tmp(&format!("sac-seed-{seed}"));
+        let mut opts = RunOptions::new(&dir, 12_000);
+        opts.checkpoint_every = 0;
+        train(
+            &sac_pendulum(seed),
+            &mut Pendulum::new(1),
+            &opts,
+            &mut Silent,
+        )
+        .unwrap();
+        let p = Policy::load(&dir).unwrap();
+        let e = evaluate(&mut Pendulum::new(4), 20, 20_000, |o| p.act(o));
+        println!(
+            "sac pendulum seed {seed}: return {:.1} (threshold -250)",
+            e.return_mean()
+        );
+        assert!(e.return_mean() >= -250.0);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
 }
