@@ -20,7 +20,9 @@ pub struct PpoConfig {
     pub activation: Activation,
     /// Separate actor and critic networks (default false: one shared trunk, two heads).
     pub separate: bool,
-    /// Steps per environment per rollout (rl_games `horizon_length`; default 32).
+    /// Steps per environment per rollout (rl_games `horizon_length`; default 32, so 16
+    /// environments give 512 samples per update; Isaac Lab's configs use 16 to 96 with
+    /// thousands of environments).
     pub horizon: usize,
     /// Samples per minibatch (default 4096; at most `horizon * num_envs` is used).
     pub minibatch_size: usize,

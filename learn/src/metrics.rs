@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use crate::LearnError;
 
 /// What one training iteration reports (a PPO update, or `steps_per_iteration` SAC steps).
-/// Fields that do not apply to an algorithm are `None` and left out of the JSON line.
+/// Fields that do not apply to an algorithm (or an iteration without finished episodes) are
+/// `None`: `null` in the JSON line.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {
     /// Algorithm (`"ppo"` or `"sac"`).
@@ -48,6 +49,30 @@ pub struct Metrics {
     pub alpha: Option<f64>,
     /// Mean Q value of sampled batches (SAC).
     pub q_mean: Option<f64>,
+}
+
+impl Metrics {
+    /// One line for a progress display: iteration, env steps (of `total`), steps/s, return,
+    /// success and the algorithm's main diagnostics.
+    pub fn progress_line(&self, total: u64) -> String {
+        let mut s = format!(
+            "{} it {} | {}/{} steps | {:.0} steps/s",
+            self.algo, self.iteration, self.env_steps, total, self.steps_per_s
+        );
+        if let Some(r) = self.return_mean {
+            s += &format!(" | return {r:.3}");
+        }
+        if let Some(x) = self.success_rate {
+            s += &format!(" | success {:.0}%", 100.0 * x);
+        }
+        if let Some(kl) = self.approx_kl {
+            s += &format!(" | kl {kl:.4}");
+        }
+        if let Some(a) = self.alpha {
+            s += &format!(" | alpha {a:.4}");
+        }
+        s
+    }
 }
 
 /// Appends metrics to `metrics.jsonl` in a run folder, one JSON object per line.
@@ -203,5 +228,31 @@ impl EpisodeTracker {
         self.done_returns.clear();
         self.done_lengths.clear();
         self.successes.clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_line_and_json_round_trip() {
+        let m = Metrics {
+            algo: "ppo".into(),
+            iteration: 3,
+            env_steps: 1536,
+            steps_per_s: 1234.4,
+            return_mean: Some(-9.5),
+            success_rate: Some(0.75),
+            approx_kl: Some(0.0081),
+            ..Default::default()
+        };
+        assert_eq!(
+            m.progress_line(10_000),
+            "ppo it 3 | 1536/10000 steps | 1234 steps/s | return -9.500 | success 75% | kl 0.0081"
+        );
+        let line = serde_json::to_string(&m).unwrap();
+        let back: Metrics = serde_json::from_str(&line).unwrap();
+        assert_eq!(back, m);
     }
 }
