@@ -39,9 +39,12 @@ pub trait VecEnvironment {
     /// Checkpoints record it and refuse to resume against an environment with another.
     fn identity(&self) -> String;
     /// Resets every environment from `seed`; returns `num_envs * obs_dim` observations.
-    fn reset(&mut self, seed: u64) -> Vec<f32>;
-    /// Steps every environment with `num_envs * act_dim` actions.
-    fn step(&mut self, actions: &[f32]) -> BatchStep;
+    /// An `Err` stops training (no checkpoint is written from that state).
+    fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String>;
+    /// Steps every environment with `num_envs * act_dim` actions. An `Err` stops training;
+    /// an episode that merely failed (a physics blow-up, say) should end as terminated or
+    /// truncated instead, with a finite final observation.
+    fn step(&mut self, actions: &[f32]) -> Result<BatchStep, String>;
     /// The complete state of the batch (simulation state and RNGs) as bytes, if the
     /// environment can save it. A checkpoint then stores it and a resumed run continues the
     /// same episodes; without it, learners reset every environment at each checkpoint (in

@@ -123,17 +123,23 @@ impl VecEnvironment for PointReach {
     fn identity(&self) -> String {
         format!("point-reach-v1 obs 4 act 2 limit {POINT_REACH_LIMIT}")
     }
-    fn reset(&mut self, seed: u64) -> Vec<f32> {
+    fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
         let mut out = Vec::with_capacity(4 * self.n);
         for i in 0..self.n {
             self.rngs[i] = Rng::derive(seed, i as u64);
             self.reset_one(i);
             self.obs_one(i, &mut out);
         }
-        out
+        Ok(out)
     }
-    fn step(&mut self, actions: &[f32]) -> BatchStep {
-        assert_eq!(actions.len(), 2 * self.n);
+    fn step(&mut self, actions: &[f32]) -> Result<BatchStep, String> {
+        if actions.len() != 2 * self.n {
+            return Err(format!(
+                "{} actions for {} envs of 2",
+                actions.len(),
+                self.n
+            ));
+        }
         let mut s = BatchStep {
             obs: Vec::with_capacity(4 * self.n),
             ..Default::default()
@@ -168,7 +174,7 @@ impl VecEnvironment for PointReach {
             }
             self.obs_one(i, &mut s.obs);
         }
-        s
+        Ok(s)
     }
     fn save_state(&self) -> Option<Vec<u8>> {
         let mut out = Vec::new();
@@ -270,17 +276,23 @@ impl VecEnvironment for Pendulum {
     fn identity(&self) -> String {
         format!("pendulum-v1 obs 3 act 1 limit {PENDULUM_LIMIT}")
     }
-    fn reset(&mut self, seed: u64) -> Vec<f32> {
+    fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
         let mut out = Vec::with_capacity(3 * self.n);
         for i in 0..self.n {
             self.rngs[i] = Rng::derive(seed, i as u64);
             self.reset_one(i);
             self.obs_one(i, &mut out);
         }
-        out
+        Ok(out)
     }
-    fn step(&mut self, actions: &[f32]) -> BatchStep {
-        assert_eq!(actions.len(), self.n);
+    fn step(&mut self, actions: &[f32]) -> Result<BatchStep, String> {
+        if actions.len() != self.n {
+            return Err(format!(
+                "{} actions for {} envs of 1",
+                actions.len(),
+                self.n
+            ));
+        }
         let (g, m, l, dt) = (10.0, 1.0, 1.0, 0.05);
         let mut s = BatchStep {
             obs: Vec::with_capacity(3 * self.n),
@@ -311,7 +323,7 @@ impl VecEnvironment for Pendulum {
             }
             self.obs_one(i, &mut s.obs);
         }
-        s
+        Ok(s)
     }
     fn save_state(&self) -> Option<Vec<u8>> {
         let mut out = Vec::new();
@@ -352,11 +364,11 @@ mod tests {
     #[test]
     fn point_reach_pd_controller_succeeds_and_state_round_trips() {
         let mut env = PointReach::new(8);
-        let mut obs = env.reset(5);
+        let mut obs = env.reset(5).unwrap();
         let mut ok = 0;
         let mut ended = 0;
         for _ in 0..600 {
-            let s = env.step(&PointReach::pd_action(&obs));
+            let s = env.step(&PointReach::pd_action(&obs)).unwrap();
             for i in 0..8 {
                 if let Some(succ) = s.success[i] {
                     ended += 1;
@@ -370,26 +382,27 @@ mod tests {
         // Restoring a saved state replays the same steps.
         let saved = env.save_state().unwrap();
         let a: Vec<f32> = vec![0.3; 16];
-        let s1 = env.step(&a);
+        let s1 = env.step(&a).unwrap();
         env.load_state(&saved).unwrap();
-        assert_eq!(env.step(&a), s1);
+        assert_eq!(env.step(&a).unwrap(), s1);
+        assert!(env.step(&a[1..]).is_err());
         assert!(env.load_state(&saved[1..]).is_err());
     }
 
     #[test]
     fn pendulum_matches_hand_step_and_truncates() {
         let mut env = Pendulum::new(1);
-        env.reset(0);
+        env.reset(0).unwrap();
         env.th[0] = 0.5;
         env.thdot[0] = 0.0;
-        let s = env.step(&[1.0]);
+        let s = env.step(&[1.0]).unwrap();
         let thdot = (15.0 * 0.5f64.sin() + 3.0) * 0.05;
         assert!((env.thdot[0] - thdot).abs() < 1e-12);
         assert!((env.th[0] - (0.5 + thdot * 0.05)).abs() < 1e-12);
         assert!((s.rewards[0] as f64 + 0.25 + 0.001).abs() < 1e-6);
         let mut truncs = 0;
         for _ in 0..399 {
-            truncs += env.step(&[0.0]).truncated[0] as usize;
+            truncs += env.step(&[0.0]).unwrap().truncated[0] as usize;
         }
         assert_eq!(truncs, 2);
     }

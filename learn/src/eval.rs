@@ -1,7 +1,8 @@
 //! Evaluation of a deterministic policy on an environment batch.
 
 use crate::metrics::EpisodeTracker;
-use crate::VecEnvironment;
+use crate::runner::{check_step, EnvShape};
+use crate::{LearnError, VecEnvironment};
 
 /// Results of evaluation episodes.
 #[derive(Clone, Debug, PartialEq)]
@@ -36,8 +37,10 @@ pub fn evaluate(
     episodes: usize,
     seed: u64,
     mut act: impl FnMut(&[f32]) -> Vec<f32>,
-) -> EvalSummary {
-    let mut obs = env.reset(seed);
+) -> Result<EvalSummary, LearnError> {
+    let shape = EnvShape::of(env)?;
+    let mut obs = env.reset(seed).map_err(LearnError::Env)?;
+    shape.check_obs(&obs, "reset")?;
     let mut tracker = EpisodeTracker::new(env.num_envs());
     let mut out = EvalSummary {
         returns: Vec::new(),
@@ -45,7 +48,8 @@ pub fn evaluate(
         successes: Vec::new(),
     };
     while out.returns.len() < episodes {
-        let step = env.step(&act(&obs));
+        let step = env.step(&act(&obs)).map_err(LearnError::Env)?;
+        check_step(&shape, &step)?;
         tracker.record(&step);
         let (r, l, s) = tracker.take_finished();
         out.returns.extend(r);
@@ -56,5 +60,5 @@ pub fn evaluate(
     out.returns.truncate(episodes);
     out.lengths.truncate(episodes);
     out.successes.truncate(episodes);
-    out
+    Ok(out)
 }

@@ -150,7 +150,7 @@ impl Ppo {
         let device = Device::flex().autodiff();
         let mut rng = Rng::new(cfg.seed);
         let model = ActorCritic::new(&mut rng, shape.obs_dim, shape.act_dim, cfg, &device);
-        let obs = env.reset(cfg.seed);
+        let obs = env.reset(cfg.seed).map_err(LearnError::Env)?;
         shape.check_obs(&obs, "reset")?;
         Ok(Ppo {
             cfg: cfg.clone(),
@@ -235,7 +235,7 @@ impl Ppo {
                 log_std_t.clone(),
             ));
             let env_actions = rescale(&a, &self.shape.low, &self.shape.high);
-            let step = env.step(&env_actions);
+            let step = env.step(&env_actions).map_err(LearnError::Env)?;
             check_step(&self.shape, &step)?;
             self.tracker.record(&step);
             // Values of the final observations of episodes cut by a time limit.
@@ -540,7 +540,9 @@ impl Trainer for Ppo {
 
     fn restart_episodes(&mut self, env: &mut dyn VecEnvironment) -> Result<(), LearnError> {
         self.resets += 1;
-        self.obs = env.reset(Rng::derive(self.cfg.seed, self.resets).next_u64());
+        self.obs = env
+            .reset(Rng::derive(self.cfg.seed, self.resets).next_u64())
+            .map_err(LearnError::Env)?;
         self.shape.check_obs(&self.obs, "reset")?;
         self.tracker.restart();
         Ok(())

@@ -333,10 +333,10 @@ mod tests {
         fn identity(&self) -> String {
             String::new()
         }
-        fn reset(&mut self, seed: u64) -> Vec<f32> {
+        fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
             self.0.reset(seed)
         }
-        fn step(&mut self, a: &[f32]) -> BatchStep {
+        fn step(&mut self, a: &[f32]) -> Result<BatchStep, String> {
             self.0.step(a)
         }
     }

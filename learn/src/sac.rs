@@ -328,7 +328,7 @@ impl Sac {
                 &device,
             )),
         };
-        let obs = env.reset(cfg.seed);
+        let obs = env.reset(cfg.seed).map_err(LearnError::Env)?;
         shape.check_obs(&obs, "reset")?;
         Ok(Sac {
             replay: Replay::new(cfg.buffer_size, od, ad),
@@ -388,7 +388,9 @@ impl Sac {
             let (a, _) = infer.sample(tensor2(&self.obs, n, od, &dev), tensor2(&eps, n, ad, &dev));
             to_vec(a)
         };
-        let step = env.step(&rescale(&a, &self.shape.low, &self.shape.high));
+        let step = env
+            .step(&rescale(&a, &self.shape.low, &self.shape.high))
+            .map_err(LearnError::Env)?;
         check_step(&self.shape, &step)?;
         self.tracker.record(&step);
         for i in 0..n {
@@ -631,7 +633,9 @@ impl Trainer for Sac {
 
     fn restart_episodes(&mut self, env: &mut dyn VecEnvironment) -> Result<(), LearnError> {
         self.resets += 1;
-        self.obs = env.reset(Rng::derive(self.cfg.seed, self.resets).next_u64());
+        self.obs = env
+            .reset(Rng::derive(self.cfg.seed, self.resets).next_u64())
+            .map_err(LearnError::Env)?;
         self.shape.check_obs(&self.obs, "reset")?;
         self.tracker.restart();
         Ok(())

@@ -83,8 +83,8 @@ fn ppo_solves_point_reach_deterministically() {
 
     let policy = Policy::load(&dirs[0]).unwrap();
     let mut env = PointReach::new(16);
-    let learned = evaluate(&mut env, 200, 10_000, |o| policy.act(o));
-    let reference = evaluate(&mut env, 200, 10_000, PointReach::pd_action);
+    let learned = evaluate(&mut env, 200, 10_000, |o| policy.act(o)).unwrap();
+    let reference = evaluate(&mut env, 200, 10_000, PointReach::pd_action).unwrap();
     let threshold = reference.return_mean() * 1.25;
     println!(
         "ppo reach eval (200 episodes, seed 10000): success {:.3} (threshold 0.95), return {:.3} (threshold {threshold:.3}; PD controller {:.3}, success {:.3})",
@@ -131,14 +131,15 @@ fn sac_solves_pendulum_deterministically() {
     assert_eq!(hashes[0], hashes[1], "same seed, different parameters");
     let policy = Policy::load(&dirs[0]).unwrap();
     let mut env = Pendulum::new(4);
-    let learned = evaluate(&mut env, 20, 20_000, |o| policy.act(o));
-    let random = evaluate(&mut env, 20, 20_000, |o| {
+    let learned = evaluate(&mut env, 20, 20_000, |o| policy.act(o)).unwrap();
+    let zero = evaluate(&mut env, 20, 20_000, |o| {
         o.iter().step_by(3).map(|_| 0.0).collect()
-    });
+    })
+    .unwrap();
     println!(
         "sac pendulum eval (20 episodes, seed 20000): return {:.1} (threshold -250; zero torque {:.1})",
         learned.return_mean(),
-        random.return_mean()
+        zero.return_mean()
     );
     assert!(learned.return_mean() >= -250.0);
     for d in dirs {
@@ -166,10 +167,10 @@ impl<E: VecEnvironment> VecEnvironment for Stateless<E> {
     fn identity(&self) -> String {
         self.0.identity()
     }
-    fn reset(&mut self, seed: u64) -> Vec<f32> {
+    fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
         self.0.reset(seed)
     }
-    fn step(&mut self, actions: &[f32]) -> modesuite_learn::BatchStep {
+    fn step(&mut self, actions: &[f32]) -> Result<modesuite_learn::BatchStep, String> {
         self.0.step(actions)
     }
 }
@@ -468,13 +469,13 @@ fn divergence_is_an_error_not_a_checkpoint() {
         fn identity(&self) -> String {
             "huge".into()
         }
-        fn reset(&mut self, seed: u64) -> Vec<f32> {
+        fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
             self.0.reset(seed)
         }
-        fn step(&mut self, actions: &[f32]) -> modesuite_learn::BatchStep {
-            let mut s = self.0.step(actions);
+        fn step(&mut self, actions: &[f32]) -> Result<modesuite_learn::BatchStep, String> {
+            let mut s = self.0.step(actions)?;
             s.rewards.iter_mut().for_each(|r| *r = 1e30);
-            s
+            Ok(s)
         }
     }
     let dir = tmp("diverge");
@@ -513,7 +514,7 @@ fn learning_on_other_seeds() {
         )
         .unwrap();
         let p = Policy::load(&dir).unwrap();
-        let e = evaluate(&mut PointReach::new(16), 200, 10_000, |o| p.act(o));
+        let e = evaluate(&mut PointReach::new(16), 200, 10_000, |o| p.act(o)).unwrap();
         println!(
             "ppo reach seed {seed}: success {:.3} (threshold 0.95), return {:.3} (threshold -12.910)",
             e.success_rate().unwrap(),
@@ -534,7 +535,7 @@ fn learning_on_other_seeds() {
         )
         .unwrap();
         let p = Policy::load(&dir).unwrap();
-        let e = evaluate(&mut Pendulum::new(4), 20, 20_000, |o| p.act(o));
+        let e = evaluate(&mut Pendulum::new(4), 20, 20_000, |o| p.act(o)).unwrap();
         println!(
             "sac pendulum seed {seed}: return {:.1} (threshold -250)",
             e.return_mean()
@@ -542,4 +543,58 @@ fn learning_on_other_seeds() {
         assert!(e.return_mean() >= -250.0);
         std::fs::remove_dir_all(dir).unwrap();
     }
+}
+
+/// An environment error ends training with that error; the last checkpoint stays as it was.
+#[test]
+fn environment_errors_end_training() {
+    struct Failing(PointReach, u32);
+    impl VecEnvironment for Failing {
+        fn num_envs(&self) -> usize {
+            self.0.num_envs()
+        }
+        fn obs_dim(&self) -> usize {
+            4
+        }
+        fn act_dim(&self) -> usize {
+            2
+        }
+        fn action_bounds(&self) -> (Vec<f32>, Vec<f32>) {
+            self.0.action_bounds()
+        }
+        fn identity(&self) -> String {
+            "failing".into()
+        }
+        fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
+            self.0.reset(seed)
+        }
+        fn step(&mut self, actions: &[f32]) -> Result<modesuite_learn::BatchStep, String> {
+            self.1 += 1;
+            if self.1 == 30 {
+                return Err("the simulator failed".into());
+            }
+            self.0.step(actions)
+        }
+    }
+    let dir = tmp("env-error");
+    let cfg = AlgoConfig::Ppo(PpoConfig {
+        hidden: vec![8],
+        horizon: 4,
+        minibatch_size: 16,
+        ..PpoConfig::default()
+    });
+    let mut opts = RunOptions::new(&dir, 1000);
+    opts.checkpoint_every = 2;
+    let e = train(
+        &cfg,
+        &mut Failing(PointReach::new(4), 0),
+        &opts,
+        &mut Silent,
+    )
+    .unwrap_err();
+    assert!(format!("{e}").contains("the simulator failed"), "{e}");
+    // Iterations 1-7 stepped 28 times; the checkpoint of iteration 6 is the last one.
+    let c = Checkpoint::load(&dir.join("checkpoint.bin")).unwrap();
+    assert_eq!(c.u64s("counters").unwrap()[0], 6);
+    std::fs::remove_dir_all(dir).unwrap();
 }
