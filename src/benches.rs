@@ -208,7 +208,7 @@ pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     extensions: {{ "robots": [(name: "robot", model: "{case}", actions: {actions})] }},
 )"#
         );
-        let mut env = crate::cli::env_from_text(&text).map_err(|e| format!("{case}: {e}"))?;
+        let mut env = crate::make::env_from_text(&text).map_err(|e| format!("{case}: {e}"))?;
         env.reset(Some(0));
         let n = env.spaces().action.flat_dim();
         // Forward at half the base limit (franka 0.25 m/s) or the full walking command (spot
@@ -265,7 +265,7 @@ pub fn tasks_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
         // 16 envs sharing one compiled scene, as a `VecEnv` of a task gets them
         let make = || -> Result<Vec<modesuite_engine::Env>, String> {
             let mut envs =
-                crate::cli::envs_for_target(id, None, 16).map_err(|e| format!("{id}: {e}"))?;
+                crate::make::envs_for_target(id, None, 16).map_err(|e| format!("{id}: {e}"))?;
             for (i, e) in envs.iter_mut().enumerate() {
                 e.reset(Some(i as u64));
             }
@@ -362,7 +362,7 @@ pub const RENDER_BENCH_SCENE: &str = include_str!("../scenes/examples/tabletop_c
 fn render_bench_env() -> Result<(modesuite_engine::Env, modesuite_render::EnvRenderer), String> {
     let desc = modesuite_engine::scene::parse_str(RENDER_BENCH_SCENE, "tabletop_cameras.scene.ron")
         .map_err(|e| e.to_string())?;
-    let mut app = crate::cli::default_app();
+    let mut app = crate::make::default_app();
     let model = app
         .compile_scene(&desc, &modesuite_engine::SceneSource::in_memory("."))
         .map_err(|e| e.to_string())?;

@@ -27,6 +27,9 @@ use modesuite_engine::bench::{BenchOptions, BenchRecord};
 use modesuite_engine::prelude::*;
 use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
+
+use crate::episode::{final_success, EpisodeEnd};
+use crate::make::{self, load_plugins, MakeError, MakeOptions};
 use modesuite_render::video::{write_frame_png, VideoWriter};
 use modesuite_render::{CameraDesc, EnvRenderer, Orbit, RenderConfig, RenderError};
 
@@ -202,115 +205,19 @@ impl From<SceneError> for CliError {
     }
 }
 
+impl From<MakeError> for CliError {
+    fn from(e: MakeError) -> Self {
+        match e {
+            MakeError::Input(m) => Self::input(m),
+            MakeError::Runtime(m) => Self::runtime(m),
+        }
+    }
+}
+
 impl From<PluginLoadError> for CliError {
     fn from(e: PluginLoadError) -> Self {
         Self::input(format!("--plugin: {e}"))
     }
-}
-
-/// A fresh app with every default plugin.
-pub fn default_app() -> SimApp {
-    let mut app = SimApp::new();
-    app.add_group(crate::DefaultPlugins);
-    app
-}
-
-/// Spawns `model` into `app` and, when the task observes camera images, attaches a renderer
-/// (the shared device) so the cameras are rendered in each env's `Sense` pass.
-pub fn spawn_with_cameras(
-    app: &mut SimApp,
-    model: Arc<modesuite_engine::SceneModel>,
-) -> Result<(), CliError> {
-    app.spawn_scene(model)?;
-    let wants = app
-        .world
-        .get_resource::<modesuite_render::CameraRequests>()
-        .is_some_and(|r| !r.0.is_empty());
-    if wants {
-        modesuite_render::prepare(app).map_err(render_err)?;
-    }
-    Ok(())
-}
-
-/// Appends an RGB-D image of `camera` to the task's `policy` observation group (`run --rgbd`):
-/// sets the task section's `camera_observation`.
-pub fn override_rgbd(desc: &mut SceneDesc, camera: &str) -> Result<(), CliError> {
-    let bad = |m: &str| CliError::input(format!("--rgbd {camera}: {m}"));
-    if camera.is_empty() || camera.contains(['"', '\\']) {
-        return Err(bad("a camera name of the scene's render section"));
-    }
-    let raw = desc
-        .extensions
-        .get("task")
-        .ok_or_else(|| bad("the scene has no task section"))?;
-    let text = raw.get_ron();
-    let open = text
-        .find('(')
-        .ok_or_else(|| bad("unreadable task section"))?;
-    let new = format!(
-        "{}(camera_observation: Some((camera: \"{camera}\", channels: Rgbd)), {}",
-        &text[..open],
-        &text[open + 1..]
-    );
-    let value = ron::value::RawValue::from_boxed_ron(new.into_boxed_str())
-        .map_err(|e| bad(&e.to_string()))?;
-    desc.extensions.insert("task".into(), value);
-    Ok(())
-}
-
-/// An env of a scene given as RON text (in-memory source, paths relative to the working
-/// directory), with every default plugin.
-pub fn env_from_text(text: &str) -> Result<Env, SceneError> {
-    let desc = modesuite_engine::scene::parse_str(text, "<memory>")?;
-    let mut app = default_app();
-    let model = app.compile_scene(&desc, &SceneSource::in_memory("."))?;
-    app.spawn_scene(model)?;
-    Ok(Env::new(app))
-}
-
-/// An env (default plugins, not yet reset) of a scene file or task id, with optional action
-/// modes replacing the first robot's (see `run --actions`).
-pub fn env_for_target(target: &str, actions: Option<&str>) -> Result<Env, CliError> {
-    let mut envs = envs_for_target(target, actions, 1)?;
-    Ok(envs.remove(0))
-}
-
-/// `n` (at least 1) envs of a scene file or task id, as [`env_for_target`] makes one, that
-/// share one compiled scene (FEM models, robot models, meshes behind `Arc`): the scene is
-/// compiled once, and 16 envs of Franka Place hold about 270 KB less each than 16 compiled
-/// apart (for a `VecEnv`).
-pub fn envs_for_target(
-    target: &str,
-    actions: Option<&str>,
-    n: usize,
-) -> Result<Vec<Env>, CliError> {
-    let (mut desc, source) = load_target(target)?;
-    if let Some(a) = actions {
-        override_actions(&mut desc, a)?;
-    }
-    let first = default_app();
-    let model = first.compile_scene(&desc, &source)?;
-    std::iter::once(first)
-        .chain((1..n.max(1)).map(|_| default_app()))
-        .map(|mut app| {
-            spawn_with_cameras(&mut app, model.clone())?;
-            Ok(Env::new(app))
-        })
-        .collect()
-}
-
-/// Loads the compiled plugins named by `--plugin` (once; every env shares them).
-pub fn load_plugins(paths: &[PathBuf]) -> Result<Vec<Arc<DynamicPlugin>>, PluginLoadError> {
-    paths.iter().map(DynamicPlugin::load).collect()
-}
-
-/// A fresh app with every default plugin and the given compiled plugins.
-pub fn app_with_plugins(plugins: &[Arc<DynamicPlugin>]) -> Result<SimApp, PluginLoadError> {
-    let mut app = default_app();
-    for p in plugins {
-        app.add_dynamic_plugin(p.clone())?;
-    }
-    Ok(app)
 }
 
 /// Runs the CLI; returns the process exit code's error on failure.
@@ -374,7 +281,7 @@ fn list(
     plugins: &[Arc<DynamicPlugin>],
     out: &mut dyn Write,
 ) -> Result<(), CliError> {
-    let app = app_with_plugins(plugins)?;
+    let app = make::app_with_plugins(plugins)?;
     let reg = app.registry();
     let all = what.is_none();
     let want = |k: &str| all || what == Some(k);
@@ -525,7 +432,7 @@ fn compile_file(
     plugins: &[Arc<DynamicPlugin>],
 ) -> Result<(Arc<SceneModel>, SimApp), CliError> {
     let (desc, source) = scene::load_file(path)?;
-    let app = app_with_plugins(plugins)?;
+    let app = make::app_with_plugins(plugins)?;
     let model = app.compile_scene(&desc, &source)?;
     Ok((model, app))
 }
@@ -552,100 +459,15 @@ fn validate(
     Ok(())
 }
 
-/// The scenes folder task ids resolve in: `$MODESUITE_SCENES`, else the repository's `scenes/`
-/// (the binary falls back to its embedded copies of the task files).
-pub fn scenes_dir() -> PathBuf {
-    std::env::var_os("MODESUITE_SCENES")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes"))
-}
-
-/// Loads a scene file or a task id (`MoDe-<Robot>-<Task>-v0`) named on the command line.
-pub fn load_target(target: &str) -> Result<(SceneDesc, SceneSource), CliError> {
-    let path = Path::new(target);
-    if path.is_file() {
-        return Ok(scene::load_file(path)?);
-    }
-    if target.starts_with("MoDe-") {
-        let dir = scenes_dir();
-        let file = modesuite_tasks::task_scene_path(&dir, target).map_err(CliError::input)?;
-        if file.is_file() {
-            return Ok(scene::load_file(&file)?);
-        }
-        let rel = file
-            .strip_prefix(&dir)
-            .map(|r| r.to_string_lossy().replace('\\', "/"))
-            .unwrap_or_default();
-        let text = modesuite_tasks::embedded(&rel)
-            .ok_or_else(|| CliError::input(format!("{target}: {} is missing", file.display())))?;
-        let label = format!("{}/{rel}", modesuite_tasks::EMBEDDED_DIR);
-        let desc = scene::parse_str(text, &label)?;
-        let folder = Path::new(&label)
-            .parent()
-            .map(Path::to_path_buf)
-            .unwrap_or_default();
-        return Ok((desc, SceneSource::in_memory(folder)));
-    }
-    Err(CliError::input(format!(
-        "{target}: no such scene file, and not a task id (MoDe-<Robot>-<Task>-v0)"
-    )))
-}
-
-/// Replaces the `actions` of the first robot of the scene's `robots` section with `ron`.
-pub fn override_actions(desc: &mut SceneDesc, ron_text: &str) -> Result<(), CliError> {
-    let bad = |m: &str| CliError::input(format!("--actions {ron_text}: {m}"));
-    modesuite_robots::ActionConfig::parse_ron(ron_text).map_err(|e| bad(&e))?;
-    let raw = desc
-        .extensions
-        .get("robots")
-        .ok_or_else(|| bad("the scene has no robots section"))?;
-    let text = raw.get_ron().to_string();
-    let new = match text.find("actions:") {
-        Some(k) => {
-            let open = k + text[k..]
-                .find('(')
-                .ok_or_else(|| bad("unreadable robots section"))?;
-            let mut depth = 0usize;
-            let mut end = None;
-            for (i, c) in text[open..].char_indices() {
-                match c {
-                    '(' => depth += 1,
-                    ')' => {
-                        depth -= 1;
-                        if depth == 0 {
-                            end = Some(open + i + 1);
-                            break;
-                        }
-                    }
-                    _ => {}
-                }
-            }
-            let end = end.ok_or_else(|| bad("unreadable robots section"))?;
-            format!("{}actions: {ron_text}{}", &text[..k], &text[end..])
-        }
-        None => {
-            let k = text
-                .find("(name:")
-                .ok_or_else(|| bad("the robots section lists no robot"))?;
-            format!("{}(actions: {ron_text}, {}", &text[..k], &text[k + 1..])
-        }
-    };
-    let value = ron::value::RawValue::from_boxed_ron(new.into_boxed_str())
-        .map_err(|e| bad(&e.to_string()))?;
-    desc.extensions.insert("robots".into(), value);
-    Ok(())
-}
-
 fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let plugins = load_plugins(&args.plugin)?;
-    let (mut desc, source) = load_target(&args.target)?;
-    if let Some(a) = &args.actions {
-        override_actions(&mut desc, a)?;
-    }
-    if let Some(c) = &args.rgbd {
-        override_rgbd(&mut desc, c)?;
-    }
-    run_scene(&desc, &source, args, &plugins, out)
+    let opts = MakeOptions {
+        actions: args.actions.clone(),
+        rgbd: args.rgbd.clone(),
+        plugins: load_plugins(&args.plugin)?,
+        episode_steps: None,
+    };
+    let made = make::make_envs(&args.target, &opts, 1)?;
+    run_scene(made, args, out)
 }
 
 /// Parses `WIDTHxHEIGHT`.
@@ -665,11 +487,7 @@ fn parse_size(flag: &str, s: &str) -> Result<(u32, u32), CliError> {
 }
 
 fn render_err(e: RenderError) -> CliError {
-    match e {
-        RenderError::Scene(e) => CliError::input(e.to_string()),
-        RenderError::UnknownCamera { .. } => CliError::input(e.to_string()),
-        other => CliError::runtime(other.to_string()),
-    }
+    MakeError::from(e).into()
 }
 
 /// Records frames of a run into a video and/or PNG files.
@@ -816,11 +634,11 @@ impl Recorder {
 
 fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let size = parse_size("--size", &args.size)?;
-    let (mut desc, source) = load_target(&args.target)?;
+    let (mut desc, source) = make::load_target(&args.target)?;
     if let Some(a) = &args.actions {
-        override_actions(&mut desc, a)?;
+        make::override_actions(&mut desc, a)?;
     }
-    let mut app = default_app();
+    let mut app = make::default_app();
     let model = app.compile_scene(&desc, &source)?;
     RenderConfig::from_scene(&model)?;
     app.spawn_scene(model)?;
@@ -894,15 +712,8 @@ impl Progress {
     }
 }
 
-fn run_scene(
-    desc: &SceneDesc,
-    source: &SceneSource,
-    args: &RunArgs,
-    plugins: &[Arc<DynamicPlugin>],
-    out: &mut dyn Write,
-) -> Result<(), CliError> {
-    let mut app = app_with_plugins(plugins)?;
-    let model = app.compile_scene(desc, source)?;
+fn run_scene(made: make::Made, args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let make::Made { envs, model } = made;
     let steps = args.steps.or(model.episode_steps).unwrap_or(600);
     if steps == 0 {
         return Err(CliError::input("--steps = 0: must be at least 1"));
@@ -912,8 +723,9 @@ fn run_scene(
     }
     RenderConfig::from_scene(&model)?;
     let mut recorder = Recorder::new(&model, args)?;
-    spawn_with_cameras(&mut app, model)?;
-    let mut env = Env::new(app);
+    let Some(mut env) = envs.into_iter().next() else {
+        return Err(CliError::runtime("no env was made"));
+    };
     // The CLI resets between episodes itself, so the final state stays for --dump-state.
     env.autoreset = false;
     let act_dim = env.spaces().action.flat_dim();
@@ -1065,82 +877,6 @@ fn run_scene(
     Ok(())
 }
 
-/// How a run's episode ended (`run --json`'s `ended` and `terminations`).
-#[derive(Debug, Clone, PartialEq)]
-enum EpisodeEnd {
-    /// Terminated with the task's success.
-    Success,
-    /// Terminated without success: a failure termination term fired (names of those that did,
-    /// from the step's `termination/<name>` values; empty when another system ended it).
-    Failure(Vec<String>),
-    /// Truncated by the scene's time limit (`episode_steps`).
-    TimeLimit,
-    /// Ended by an error (physics blow-up, bad action, plugin or policy failure).
-    Error,
-    /// Still running when the run's `--steps` were done.
-    Steps,
-}
-
-impl EpisodeEnd {
-    /// The end of the step `o` that ended its episode (`terminated` or `truncated`).
-    fn of(o: &StepOutcome) -> Self {
-        if o.info.error.is_some() {
-            EpisodeEnd::Error
-        } else if o.terminated && o.info.success == Some(true) {
-            EpisodeEnd::Success
-        } else if o.terminated {
-            EpisodeEnd::Failure(
-                o.info
-                    .values
-                    .iter()
-                    .filter(|(_, v)| **v != 0.0)
-                    .filter_map(|(k, _)| k.strip_prefix("termination/").map(str::to_string))
-                    .collect(),
-            )
-        } else {
-            EpisodeEnd::TimeLimit
-        }
-    }
-
-    /// `success`, `failure`, `time_limit`, `error` or `steps`.
-    fn name(&self) -> &'static str {
-        match self {
-            EpisodeEnd::Success => "success",
-            EpisodeEnd::Failure(_) => "failure",
-            EpisodeEnd::TimeLimit => "time_limit",
-            EpisodeEnd::Error => "error",
-            EpisodeEnd::Steps => "steps",
-        }
-    }
-
-    /// The failure termination terms that fired (empty for other ends).
-    fn terminations(&self) -> &[String] {
-        match self {
-            EpisodeEnd::Failure(t) => t,
-            _ => &[],
-        }
-    }
-}
-
-impl std::fmt::Display for EpisodeEnd {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.terminations() {
-            [] => f.write_str(self.name()),
-            t => write!(f, "{}: {}", self.name(), t.join(", ")),
-        }
-    }
-}
-
-/// An episode's success from its last step: that step's value, except that an episode ended by
-/// an error counts as a failure where the task has a success criterion (its earlier steps
-/// reported one, `before`); the error step itself measures none.
-fn final_success(before: Option<bool>, last: Option<bool>, error: bool) -> Option<bool> {
-    match (error, last) {
-        (true, None) => before.map(|_| false),
-        (_, s) => s,
-    }
-}
-
 fn dump_final(
     env: &mut Env,
     target: &str,
@@ -1211,20 +947,4 @@ fn bench(
         }
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::final_success;
-
-    #[test]
-    fn an_errored_episode_of_a_task_with_success_is_a_failure() {
-        // the error step measured nothing; earlier steps said "not yet": a failure
-        assert_eq!(final_success(Some(false), None, true), Some(false));
-        // no success criterion at all: still none
-        assert_eq!(final_success(None, None, true), None);
-        // a normal end keeps the last step's value
-        assert_eq!(final_success(Some(false), Some(true), false), Some(true));
-        assert_eq!(final_success(None, None, false), None);
-    }
 }

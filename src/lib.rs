@@ -17,6 +17,9 @@ pub use modesuite_tasks as tasks;
 
 pub mod benches;
 pub mod cli;
+pub mod episode;
+pub mod gym;
+pub mod make;
 
 use std::sync::Arc;
 

@@ -33,7 +33,7 @@ fn every_scene_file_validates_compiles_and_steps() {
     assert!(!files.is_empty(), "no scene files found under scenes/");
     for f in &files {
         let (desc, source) = scene::load_file(f).unwrap_or_else(|e| panic!("{e}"));
-        let mut app = modesuite::cli::default_app();
+        let mut app = modesuite::make::default_app();
         let model = app
             .compile_scene(&desc, &source)
             .unwrap_or_else(|e| panic!("{e}"));
@@ -183,7 +183,7 @@ fn decimation_and_substeps_are_counted() {
 
 fn compile_text(text: &str) -> Result<(), SceneError> {
     let desc = scene::parse_str(text, "test.scene.ron")?;
-    let app = modesuite::cli::default_app();
+    let app = modesuite::make::default_app();
     let dir = root().join("scenes/examples");
     let source = SceneSource {
         file: Some(dir.join("test.scene.ron")),

@@ -79,7 +79,7 @@ struct BeltRun {
 fn run_belt(file: &str, text: &str, steps: u64, z_rest: f64, mass: f64) -> BeltRun {
     let desc = modesuite::engine::scene::parse_str(text, file).unwrap();
     let source = SceneSource::in_memory(root());
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app.compile_scene(&desc, &source).unwrap();
     app.spawn_scene(model).unwrap();
     let mut env = Env::new(app);

@@ -61,7 +61,7 @@ fn lib(crate_name: &str) -> PathBuf {
 }
 
 fn trefoil_app() -> (SimApp, SceneDesc, SceneSource) {
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     app.load_plugin(lib("plugin-trefoil"))
         .expect("plugin loads");
     let (desc, source) = scene::load_file(&root().join(TREFOIL_SCENE)).expect("scene parses");
@@ -287,7 +287,7 @@ const PANIC_SCENE: &str = r#"Scene(
 
 #[test]
 fn a_panicking_plugin_term_ends_the_episode_with_an_error_and_the_process_goes_on() {
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     app.load_plugin(lib("plugin-panics"))
         .expect("fixture loads");
     let desc = scene::parse_str(PANIC_SCENE, "<panic scene>").unwrap();
@@ -333,7 +333,7 @@ fn a_panicking_plugin_term_ends_the_episode_with_an_error_and_the_process_goes_o
 
 #[test]
 fn a_panicking_plugin_generator_is_a_scene_error() {
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     app.load_plugin(lib("plugin-panics"))
         .expect("fixture loads");
     let desc = scene::parse_str(
@@ -434,7 +434,7 @@ fn cli_refuses_bad_plugins_with_exit_code_2() {
 #[test]
 fn scene_term_sections_name_unknown_terms_wrong_kinds_and_bad_params() {
     let app = |plugin: bool| {
-        let mut app = modesuite::cli::default_app();
+        let mut app = modesuite::make::default_app();
         if plugin {
             app.load_plugin(lib("plugin-trefoil"))
                 .expect("plugin loads");

@@ -21,7 +21,7 @@ fn setup(objects: &str, cameras: &str) -> (Env, EnvRenderer) {
         "Scene(physics: (dt: 0.016666666666666666, substeps: 2), objects: [{objects}], frames: {{\"goal\": (pos: (0.3, 0.0, 0.3))}}, extensions: {{\"render\": (cameras: [{cameras}])}})"
     );
     let desc = scene::parse_str(&text, "<test>").unwrap_or_else(|e| panic!("{e}"));
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app
         .compile_scene(&desc, &SceneSource::in_memory(common::root()))
         .unwrap_or_else(|e| panic!("{e}"));
@@ -197,7 +197,7 @@ fn stats(f: &CameraFrame, id: u32) -> (usize, f64) {
 fn cloth_and_fem_bodies_render_and_move_between_frames() {
     let path = common::root().join("scenes/examples/tabletop_cameras.scene.ron");
     let (desc, source) = scene::load_file(&path).unwrap_or_else(|e| panic!("{e}"));
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app
         .compile_scene(&desc, &source)
         .unwrap_or_else(|e| panic!("{e}"));
@@ -237,7 +237,7 @@ fn rendering_does_not_change_the_simulation() {
     let path = common::root().join("scenes/examples/tabletop_cameras.scene.ron");
     let run = |render_every: Option<u64>| {
         let (desc, source) = scene::load_file(&path).unwrap_or_else(|e| panic!("{e}"));
-        let mut app = modesuite::cli::default_app();
+        let mut app = modesuite::make::default_app();
         let model = app
             .compile_scene(&desc, &source)
             .unwrap_or_else(|e| panic!("{e}"));
@@ -385,7 +385,7 @@ fn markers_are_translucent_and_only_in_colour() {
 
 #[test]
 fn scene_cameras_are_validated_with_located_errors() {
-    let app = modesuite::cli::default_app();
+    let app = modesuite::make::default_app();
     let bad = r#"Scene(objects: [(name: "ground", shape: Plane(size: (1.0, 1.0)), body: Static)],
         extensions: {"render": (cameras: [(name: "c", width: 16, height: 16, attach: "nobody")])})"#;
     let desc = scene::parse_str(bad, "<test>").unwrap();

@@ -474,7 +474,7 @@ fn viewer_under_xvfb_takes_keys_moves_the_camera_and_records_actions() {
     assert_eq!(names, expect);
     // The robot drove forward: compare the final base with the same task reset with seed 5.
     let mut env =
-        modesuite::cli::env_for_target("MoDe-Franka-Place-v0", Some("(discrete: true)")).unwrap();
+        modesuite::make::env_for_target("MoDe-Franka-Place-v0", Some("(discrete: true)")).unwrap();
     env.reset(Some(5));
     let x0 = {
         let r = &env.app.world.resource::<modesuite::robots::Robots>().robots[0];

@@ -38,7 +38,7 @@ fn ee_and_base(env: &Env) -> (Vector3<f64>, Vector3<f64>, bool) {
 fn scene_env(name: &str) -> Env {
     let path = common::root().join(format!("scenes/examples/{name}.scene.ron"));
     let (desc, source) = modesuite::engine::scene::load_file(&path).unwrap();
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app.compile_scene(&desc, &source).unwrap();
     app.spawn_scene(model).unwrap();
     let mut e = Env::new(app);
@@ -51,7 +51,7 @@ fn scene_env(name: &str) -> Env {
 
 fn compile_err(text: &str) -> String {
     let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
-    let app = modesuite::cli::default_app();
+    let app = modesuite::make::default_app();
     match app.compile_scene(&desc, &SceneSource::in_memory(".")) {
         Ok(_) => panic!("scene compiled"),
         Err(e) => e.to_string(),

@@ -11,16 +11,16 @@ use nalgebra::Vector3;
 const PLACE: &str = "MoDe-Franka-Place-v0";
 
 fn load(id: &str, actions: Option<&str>) -> (SceneDesc, SceneSource) {
-    let (mut desc, source) = modesuite::cli::load_target(id).unwrap_or_else(|e| panic!("{e}"));
+    let (mut desc, source) = modesuite::make::load_target(id).unwrap_or_else(|e| panic!("{e}"));
     if let Some(a) = actions {
-        modesuite::cli::override_actions(&mut desc, a).unwrap_or_else(|e| panic!("{e}"));
+        modesuite::make::override_actions(&mut desc, a).unwrap_or_else(|e| panic!("{e}"));
     }
     (desc, source)
 }
 
 fn make(id: &str, actions: Option<&str>) -> Env {
     let (desc, source) = load(id, actions);
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app
         .compile_scene(&desc, &source)
         .unwrap_or_else(|e| panic!("{e}"));
@@ -48,7 +48,7 @@ fn scene_error(text: &str) -> String {
 /// The error of compiling and spawning `text`, a scene in scenes/`task`.
 fn scene_error_in(task: &str, text: &str) -> String {
     let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenes")
         .join(task);
@@ -77,7 +77,7 @@ fn task_text(task: &str, from: &str, to: &str) -> String {
 /// An app with `text` (a scene in scenes/`task`) compiled and spawned.
 fn task_app(task: &str, text: &str) -> modesuite::engine::SimApp {
     let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenes")
         .join(task);
@@ -103,7 +103,7 @@ fn ids_resolve_and_unimplemented_ones_say_so() {
     let ids = modesuite::tasks::all_ids();
     assert_eq!(ids.len(), 16);
     for id in &ids {
-        let r = modesuite::cli::load_target(id);
+        let r = modesuite::make::load_target(id);
         if modesuite::tasks::IMPLEMENTED.contains(&id.as_str()) {
             assert!(r.is_ok(), "{id}");
         } else {
@@ -111,7 +111,7 @@ fn ids_resolve_and_unimplemented_ones_say_so() {
             assert!(e.contains("not implemented yet"), "{id}: {e}");
         }
     }
-    let e = modesuite::cli::load_target("MoDe-Franka-Plase-v0")
+    let e = modesuite::make::load_target("MoDe-Franka-Plase-v0")
         .err()
         .unwrap()
         .to_string();
@@ -885,7 +885,7 @@ fn cloth_region_terms_measure_the_napkin() {
         "robots": ["#,
     );
     let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app
         .compile_scene(&desc, &SceneSource::in_memory("."))
         .unwrap();
@@ -1237,12 +1237,12 @@ fn rgbd_observation_of_the_robot_camera_follows_the_state_terms() {
     for id in [PLACE, "MoDe-Spot-Uncover-v0"] {
         let state_dim = make(id, None).spaces().observation.flat_dim();
         let (mut desc, source) = load(id, None);
-        modesuite::cli::override_rgbd(&mut desc, "robot").unwrap();
-        let mut app = modesuite::cli::default_app();
+        modesuite::make::override_rgbd(&mut desc, "robot").unwrap();
+        let mut app = modesuite::make::default_app();
         let model = app
             .compile_scene(&desc, &source)
             .unwrap_or_else(|e| panic!("{e}"));
-        modesuite::cli::spawn_with_cameras(&mut app, model).unwrap_or_else(|e| panic!("{e}"));
+        modesuite::make::spawn_with_cameras(&mut app, model).unwrap_or_else(|e| panic!("{e}"));
         let mut env = Env::new(app);
         let space = env.spaces().observation.clone();
         let Space::Dict(items) = &space else {
@@ -1293,8 +1293,8 @@ fn rgbd_observation_of_the_robot_camera_follows_the_state_terms() {
     }
     // Error: a camera the scene does not have.
     let (mut desc, source) = load(PLACE, None);
-    modesuite::cli::override_rgbd(&mut desc, "nope").unwrap();
-    let app = modesuite::cli::default_app();
+    modesuite::make::override_rgbd(&mut desc, "nope").unwrap();
+    let app = modesuite::make::default_app();
     let e = match app.compile_scene(&desc, &source) {
         Ok(_) => panic!("an unknown camera is refused"),
         Err(e) => e.to_string(),
@@ -1317,11 +1317,11 @@ fn image_observations_stack_their_history_item_by_item() {
     );
     let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/place");
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app
         .compile_scene(&desc, &SceneSource::in_memory(dir))
         .unwrap_or_else(|e| panic!("{e}"));
-    modesuite::cli::spawn_with_cameras(&mut app, model).unwrap_or_else(|e| panic!("{e}"));
+    modesuite::make::spawn_with_cameras(&mut app, model).unwrap_or_else(|e| panic!("{e}"));
     let mut env = Env::new(app);
     let Space::Dict(items) = env.spaces().observation.clone() else {
         panic!("{:?}", env.spaces().observation)
@@ -1364,8 +1364,8 @@ fn envs_sharing_one_compiled_scene_step_as_separately_built_ones() {
     // `envs_for_target` compiles the scene once for all its envs (a `VecEnv`'s, the bench's):
     // each must still be its own world, bit-identical to an env built alone.
     for id in [PLACE, "MoDe-Spot-Uncover-v0"] {
-        let mut shared = modesuite::cli::envs_for_target(id, None, 3).unwrap();
-        let mut alone = modesuite::cli::env_for_target(id, None).unwrap();
+        let mut shared = modesuite::make::envs_for_target(id, None, 3).unwrap();
+        let mut alone = modesuite::make::env_for_target(id, None).unwrap();
         for (seed, e) in shared.iter_mut().enumerate() {
             e.reset(Some(seed as u64));
         }
@@ -1403,7 +1403,7 @@ fn task_envs_are_bit_identical_on_one_or_two_threads_and_alone() {
     };
     for id in modesuite::tasks::IMPLEMENTED {
         let run = |threads: usize| -> Vec<u64> {
-            let envs = modesuite::cli::envs_for_target(id, None, 3).unwrap();
+            let envs = modesuite::make::envs_for_target(id, None, 3).unwrap();
             let mut v = modesuite::engine::VecEnv::new(envs, threads).unwrap();
             v.reset(Some(10));
             let dim = v.envs()[0].spaces().action.flat_dim();
@@ -1416,7 +1416,7 @@ fn task_envs_are_bit_identical_on_one_or_two_threads_and_alone() {
             v.state_hashes()
         };
         let (one, two) = (run(1), run(2));
-        let mut alone = modesuite::cli::env_for_target(id, None).unwrap();
+        let mut alone = modesuite::make::env_for_target(id, None).unwrap();
         alone.reset(Some(12));
         let dim = alone.spaces().action.flat_dim();
         let mut a = vec![0.0f32; dim];

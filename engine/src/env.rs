@@ -257,6 +257,13 @@ impl Env {
         (self.observation(), info)
     }
 
+    /// What failed in the last reset pass, if anything (also in that reset's info): the next
+    /// step ends the episode with it. After a same-step autoreset this is the new episode's
+    /// reset error, which [`Env::step`] does not return in its info.
+    pub fn pending_reset_error(&self) -> Option<&str> {
+        self.reset_error.as_deref()
+    }
+
     /// The current observation buffer.
     pub fn observation(&self) -> Vec<f32> {
         self.app.world.resource::<ObservationBuffer>().0.clone()
@@ -514,6 +521,24 @@ impl VecEnv {
             infos.push(i);
         }
         (obs, infos)
+    }
+
+    /// Resets the envs whose `mask` entry is true (every env without a mask), env `i` with
+    /// `seeds[i]` (`None`: its RNG goes on); `None` in the result for envs left alone.
+    ///
+    /// # Panics
+    /// When `seeds` or `mask` has another length than the number of envs.
+    pub fn reset_each(
+        &mut self,
+        seeds: &[Option<u64>],
+        mask: Option<&[bool]>,
+    ) -> Vec<Option<(Vec<f32>, EnvInfo)>> {
+        let n = self.envs.len();
+        assert_eq!(seeds.len(), n, "one seed per env");
+        if let Some(m) = mask {
+            assert_eq!(m.len(), n, "one mask entry per env");
+        }
+        self.map_envs(|i, e| mask.is_none_or(|m| m[i]).then(|| e.reset(seeds[i])))
     }
 
     /// Steps every env with its row of `actions` (`n_envs x act_dim`).

@@ -119,7 +119,7 @@ pub fn poke_app(scene: &Path, poison_at: Option<u64>) -> SimApp {
 
 /// Same, from a description.
 pub fn poke_app_desc(desc: &SceneDesc, source: &SceneSource, poison_at: Option<u64>) -> SimApp {
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     app.add_plugins(PokePlugin {
         target: "box",
         poison_at,
@@ -138,7 +138,7 @@ pub fn drop_scene() -> PathBuf {
 pub fn run_scene(file: &str, steps: u64) -> Env {
     let path = root().join(file);
     let (desc, source) = modesuite::engine::scene::load_file(&path).unwrap();
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app.compile_scene(&desc, &source).unwrap();
     app.spawn_scene(model).unwrap();
     let mut env = Env::new(app);
@@ -167,7 +167,7 @@ pub fn nodes(env: &mut Env, name: &str) -> Vec<nalgebra::Vector3<f64>> {
 /// An app with the default plugins and a scene given as RON text (paths resolve against `.`).
 pub fn app_from_ron(text: &str) -> SimApp {
     let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
-    let mut app = modesuite::cli::default_app();
+    let mut app = modesuite::make::default_app();
     let model = app
         .compile_scene(&desc, &SceneSource::in_memory("."))
         .unwrap();
