@@ -1,8 +1,15 @@
 #!/usr/bin/env bash
-# The whole test suite: set up, then formatting, lints (warnings are errors) and every test.
+# The whole test suite: set up, then formatting, lints (warnings are errors), every Rust test,
+# and the Python package's tests (built into a virtual environment this script creates).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
 cargo fmt --all -- --check
 cargo clippy --locked --workspace --all-targets -- -D warnings
-cargo test --locked --workspace
+# the binding crate has no Rust tests of its own: maturin builds it below
+cargo test --locked --workspace --exclude modesuite-python
+# the compiled example plugins the Python tests load
+cargo build --locked -p plugin-trefoil -p plugin-panics
+export MODESUITE_PLUGIN_DIR="$CARGO_TARGET_DIR/debug"
+source scripts/python.sh
+"$MODESUITE_VENV/bin/python" -m pytest -q -W error python/tests
