@@ -1,0 +1,68 @@
+"""User scene files, compiled plugins and the scripted experts through Python."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import modesuite
+
+
+def test_a_scene_file_without_task(root: Path) -> None:
+    env = modesuite.make_env(root / "scenes/examples/drop.scene.ron")
+    obs, info = env.reset(seed=0)
+    assert info == {}
+    assert env.action_space.shape == (0,)
+    z0 = json.loads(env.dump_state())["objects"]["box"]["position"][2]
+    for _ in range(30):
+        obs, reward, terminated, truncated, info = env.step(np.zeros(0, dtype=np.float32))
+    z1 = json.loads(env.dump_state())["objects"]["box"]["position"][2]
+    print(f"the box fell from z = {z0:.3f} to {z1:.3f} m in 30 steps")
+    assert z1 < z0 - 0.05
+    assert "success" not in info
+
+
+def test_a_compiled_plugin_by_path(root: Path, plugin_dir: Path) -> None:
+    lib = plugin_dir / "libplugin_trefoil.so"
+    assert lib.is_file(), f"{lib}: build it with cargo build -p plugin-trefoil"
+    scene = root / "examples/plugin-trefoil/trefoil.scene.ron"
+    with pytest.raises(modesuite.SceneError, match="trefoil"):
+        modesuite.make_env(scene)  # the scene names the plugin's shape; nothing loads it
+    env = modesuite.make_env(scene, plugins=[lib])
+    env.reset(seed=0)
+    _, reward, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    print(f"reward with the plugin's terms: {reward:.4f}; values {sorted(info['values'])}")
+    assert any(k.startswith("reward/") for k in info["values"])
+    venv = modesuite.make_vec_env(scene, 2, plugins=[lib], num_threads=1)
+    venv.reset(seed=0)
+    venv.step(np.zeros(venv.action_space.shape, dtype=np.float32))
+
+
+def test_the_scripted_expert_succeeds_through_python() -> None:
+    env = gym.make("modesuite/MoDe-Franka-Place-v0")
+    obs, _ = env.reset(seed=0)
+    for t in range(600):
+        obs, reward, terminated, truncated, info = env.step(env.unwrapped.expert_action())
+        if terminated or truncated:
+            break
+    print(f"expert episode: {t + 1} steps, ended {info['ended']}, is_success {info['is_success']}")
+    assert info["ended"] == "success" and info["is_success"] is True
+
+
+def test_experts_of_a_vector_env_match_single_envs() -> None:
+    venv = modesuite.make_vec_env("MoDe-Franka-Drag-v0", 2, num_threads=2)
+    venv.reset(seed=3)
+    singles = [modesuite.make_env("MoDe-Franka-Drag-v0") for _ in range(2)]
+    for i, e in enumerate(singles):
+        e.reset(seed=3 + i)
+    for _ in range(40):
+        a = venv.expert_actions()
+        for i, e in enumerate(singles):
+            assert np.array_equal(a[i], e.expert_action())
+            e.step(a[i])
+        venv.step(a)
+    assert venv.state_hashes() == [e.state_hash() for e in singles]
