@@ -28,6 +28,8 @@ use modesuite_engine::prelude::*;
 use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
 
+pub mod learn;
+
 use crate::episode::{final_success, EpisodeEnd};
 use crate::make::{self, load_plugins, MakeError, MakeOptions};
 use modesuite_render::video::{write_frame_png, VideoWriter};
@@ -71,6 +73,12 @@ pub enum Command {
     Run(RunArgs),
     /// Open the interactive viewer (orbit camera, pause/step/reset, keyboard teleoperation).
     View(ViewArgs),
+    /// Train a policy with PPO or SAC (resumable: the same command continues a run).
+    Train(learn::TrainArgs),
+    /// Evaluate a trained policy (a run or policy folder) on its task: `run --json`'s keys.
+    Eval(learn::EvalArgs),
+    /// Plot training curves (mean and standard deviation over run folders) into a PNG.
+    Plot(learn::PlotArgs),
     /// Run a benchmark suite: engine, fem, pbd, robots, render, tasks.
     Bench {
         /// Suite name.
@@ -127,7 +135,8 @@ pub struct RunArgs {
     #[arg(long)]
     pub overlays: bool,
     /// Who acts: `zero` (all-zero action), `random` (uniform over the action space, seeded by
-    /// the episode seed) or `scripted` (the task's expert).
+    /// the episode seed), `scripted` (the task's expert) or a trained policy's folder
+    /// (`train --out DIR`, or its `policy/`).
     #[arg(long, default_value = "zero")]
     pub policy: String,
     /// Action modes of the (first) robot for this run, RON, replacing the scene's, e.g.
@@ -228,6 +237,9 @@ pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
         Some(Command::Validate { files, plugin }) => validate(&files, &load_plugins(&plugin)?, out),
         Some(Command::Run(args)) => run(&args, out),
         Some(Command::View(args)) => view(&args, out),
+        Some(Command::Train(args)) => learn::train(&args, out),
+        Some(Command::Eval(args)) => learn::eval(&args, out),
+        Some(Command::Plot(args)) => learn::plot(&args, out),
         Some(Command::Bench {
             name,
             json,
@@ -730,8 +742,7 @@ fn run_scene(made: make::Made, args: &RunArgs, out: &mut dyn Write) -> Result<()
     env.autoreset = false;
     let act_dim = env.spaces().action.flat_dim();
     let mut action = vec![0.0f32; act_dim];
-    let kind: modesuite_tasks::PolicyKind = args.policy.parse().map_err(CliError::input)?;
-    let mut policy = modesuite_tasks::make_policy(kind, &env).map_err(CliError::input)?;
+    let mut policy = make_run_policy(&args.policy, &env)?;
     if !args.json {
         writeln!(
             out,
@@ -875,6 +886,22 @@ fn run_scene(made: make::Made, args: &RunArgs, out: &mut dyn Write) -> Result<()
         .map_err(io)?;
     }
     Ok(())
+}
+
+/// The policy of `run --policy`: a built-in kind, or a trained policy's folder.
+fn make_run_policy(
+    policy: &str,
+    env: &Env,
+) -> Result<Box<dyn modesuite_tasks::expert::Policy>, CliError> {
+    let path = Path::new(policy);
+    if crate::learning::policy_dir(path).is_some() {
+        let (p, _) = crate::learning::load_policy(path).map_err(CliError::input)?;
+        return Ok(Box::new(crate::learning::LearnedPolicy(p)));
+    }
+    let kind: modesuite_tasks::PolicyKind = policy
+        .parse()
+        .map_err(|e: String| CliError::input(format!("{e}, or a trained policy's folder")))?;
+    modesuite_tasks::make_policy(kind, env).map_err(CliError::input)
 }
 
 fn dump_final(

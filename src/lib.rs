@@ -10,6 +10,7 @@
 pub use modesuite_engine as engine;
 pub use modesuite_engine::prelude;
 pub use modesuite_fem as fem;
+pub use modesuite_learn as learn;
 pub use modesuite_pbd as pbd;
 pub use modesuite_render as render;
 pub use modesuite_robots as robots;
@@ -19,7 +20,9 @@ pub mod benches;
 pub mod cli;
 pub mod episode;
 pub mod gym;
+pub mod learning;
 pub mod make;
+pub mod plot;
 
 use std::sync::Arc;
 

@@ -1,0 +1,334 @@
+//! Reinforcement learning on the simulator: the bridge from [`VecEnv`] to the learners of
+//! `modesuite-learn` ([`SimEnv`]), the `train` command, and learned policies as a
+//! [`modesuite_tasks::expert::Policy`] for `run --policy DIR` and `eval`.
+//!
+//! A run folder (`train --out DIR`) holds `config.ron`, `metrics.jsonl`, `checkpoint.bin` and
+//! `policy/` (`policy.json` + `weights.bpk`); the policy's note records the target, the action
+//! modes and the command, so `eval DIR` needs nothing else. Hyper-parameters: the learner's
+//! defaults, then `scenes/<task>/<algo>.ron` next to the task's scenes, then `--config FILE`,
+//! then each `--set key=value`, then `--seed`.
+
+use std::path::{Path, PathBuf};
+
+use modesuite_engine::prelude::*;
+use modesuite_learn::{
+    AlgoConfig, BatchStep, Control, LearnError, Metrics, PpoConfig, RunOptions, SacConfig,
+    VecEnvironment,
+};
+use serde_json::json;
+
+use crate::gym::layout::{ActLayout, ObsLayout};
+use crate::make::{self, MakeOptions};
+
+/// Seed of the first evaluation episode when `eval` is not given one: far from the seeds
+/// training resets with (the training seed plus the env index).
+pub const EVAL_SEED: u64 = 1_000_000;
+
+/// A [`VecEnv`] of state observations and continuous actions, as the learners see it.
+///
+/// An episode that ends in an error (a physics blow-up, a non-finite action) counts as
+/// terminated for the learner (no value is bootstrapped from a state that blew up) and its
+/// final observation's non-finite values are zeroed.
+pub struct SimEnv {
+    vec: VecEnv,
+    identity: String,
+    obs_dim: usize,
+    act: ActLayout,
+}
+
+impl SimEnv {
+    /// Wraps `vec`, made from `target` with `actions` (both recorded in the identity that
+    /// checkpoints check). Images and discrete actions are refused.
+    pub fn new(vec: VecEnv, target: &str, actions: Option<&str>) -> Result<Self, String> {
+        let spaces = vec.spaces().clone();
+        let obs = ObsLayout::of(&spaces.observation)?;
+        let ObsLayout::Flat { dim: obs_dim } = obs else {
+            return Err(format!(
+                "{target}: the learners take state observations only (this one is a Dict with images)"
+            ));
+        };
+        let act = ActLayout::of(&spaces.action)?;
+        if act.discrete.is_some() {
+            return Err(format!(
+                "{target}: the learners take continuous actions (this env's are Discrete)"
+            ));
+        }
+        let name = Path::new(target)
+            .file_name()
+            .map_or(target.to_string(), |f| f.to_string_lossy().into_owned());
+        let identity = format!(
+            "{name} actions {} obs {obs_dim} act {}",
+            actions.unwrap_or("(scene)"),
+            act.dim
+        );
+        Ok(Self {
+            vec,
+            identity,
+            obs_dim,
+            act,
+        })
+    }
+}
+
+impl VecEnvironment for SimEnv {
+    fn num_envs(&self) -> usize {
+        self.vec.len()
+    }
+
+    fn obs_dim(&self) -> usize {
+        self.obs_dim
+    }
+
+    fn act_dim(&self) -> usize {
+        self.act.dim
+    }
+
+    fn action_bounds(&self) -> (Vec<f32>, Vec<f32>) {
+        (self.act.low.clone(), self.act.high.clone())
+    }
+
+    fn identity(&self) -> String {
+        self.identity.clone()
+    }
+
+    fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
+        Ok(self.vec.reset(Some(seed)).0)
+    }
+
+    fn step(&mut self, actions: &[f32]) -> Result<BatchStep, String> {
+        let out = self.vec.step(actions).map_err(|e| e.to_string())?;
+        let n = out.rewards.len();
+        let mut step = BatchStep {
+            obs: out.observations,
+            rewards: out.rewards.iter().map(|r| *r as f32).collect(),
+            terminated: out.terminated,
+            truncated: out.truncated,
+            final_obs: Vec::with_capacity(n),
+            success: Vec::with_capacity(n),
+        };
+        for (i, info) in out.infos.into_iter().enumerate() {
+            if info.error.is_some() {
+                step.terminated[i] = true;
+                step.truncated[i] = false;
+            }
+            // an episode ended by an error failed, where the task defines success
+            step.success
+                .push(info.episode.and_then(|e| e.success.map(|s| s && !e.error)));
+            step.final_obs.push(info.final_observation.map(|mut o| {
+                for v in o.iter_mut().filter(|v| !v.is_finite()) {
+                    *v = 0.0;
+                }
+                o
+            }));
+        }
+        // a blown-up episode's next first observation is finite (the reset restored it); the
+        // step's other observations come from live worlds
+        for v in step.obs.iter_mut().filter(|v| !v.is_finite()) {
+            *v = 0.0;
+        }
+        Ok(step)
+    }
+}
+
+/// What `train` was asked.
+#[derive(Debug, Clone)]
+pub struct TrainRequest {
+    /// Task id or scene file with a task section.
+    pub target: String,
+    /// `ppo` or `sac`.
+    pub algo: String,
+    /// Seed of the learner and of the env resets.
+    pub seed: Option<u64>,
+    /// Env steps (all envs together) to train for.
+    pub env_steps: Option<u64>,
+    /// Envs stepped together.
+    pub envs: usize,
+    /// Threads stepping the envs (0: all cores).
+    pub threads: usize,
+    /// The run folder.
+    pub out: PathBuf,
+    /// A RON file of hyper-parameters (`Ppo((...))` or `Sac((...))`).
+    pub config: Option<PathBuf>,
+    /// `key=value` overrides of single hyper-parameters (values in JSON, else strings).
+    pub set: Vec<String>,
+    /// Checkpoint every this many iterations.
+    pub checkpoint_every: u64,
+    /// Action modes replacing the scene's (RON).
+    pub actions: Option<String>,
+    /// The command line, recorded with the policy.
+    pub command: String,
+}
+
+/// Default env steps of a run when neither the command nor the task's file gives them.
+pub fn default_env_steps(algo: &str) -> u64 {
+    if algo == "sac" {
+        1_000_000
+    } else {
+        5_000_000
+    }
+}
+
+/// The task folder of a task id (`scenes/place` for `MoDe-Franka-Place-v0`), if it is one.
+fn task_folder(target: &str) -> Option<PathBuf> {
+    let (_, task) = modesuite_tasks::parse_id(target).ok()?;
+    Some(make::scenes_dir().join(task.to_lowercase()))
+}
+
+/// The hyper-parameters of a request: defaults, the task's `<algo>.ron`, `--config`, `--set`,
+/// `--seed`. Returns them and the files read.
+pub fn resolve_config(req: &TrainRequest) -> Result<(AlgoConfig, Vec<PathBuf>), String> {
+    let mut cfg = match req.algo.as_str() {
+        "ppo" => AlgoConfig::Ppo(PpoConfig::default()),
+        "sac" => AlgoConfig::Sac(SacConfig::default()),
+        other => return Err(format!("--algo {other}: ppo or sac")),
+    };
+    let mut files = Vec::new();
+    let task_file = task_folder(&req.target).map(|d| d.join(format!("{}.ron", req.algo)));
+    for path in task_file
+        .into_iter()
+        .filter(|p| p.is_file())
+        .chain(req.config.clone())
+    {
+        cfg = AlgoConfig::load(&path).map_err(|e| e.to_string())?;
+        if cfg.algo() != req.algo {
+            return Err(format!(
+                "{}: a {} configuration, but --algo {}",
+                path.display(),
+                cfg.algo(),
+                req.algo
+            ));
+        }
+        files.push(path);
+    }
+    for kv in &req.set {
+        cfg = set_field(&cfg, kv)?;
+    }
+    if let Some(s) = req.seed {
+        cfg.set_seed(s);
+    }
+    cfg.validate().map_err(|e| e.to_string())?;
+    Ok((cfg, files))
+}
+
+/// `cfg` with one field replaced: `key=value`, the value read as JSON (`3e-4`, `[128, 128]`,
+/// `null`, `true`) or else as a string.
+pub fn set_field(cfg: &AlgoConfig, kv: &str) -> Result<AlgoConfig, String> {
+    let bad = |m: &str| format!("--set {kv}: {m}");
+    let (key, value) = kv
+        .split_once('=')
+        .ok_or_else(|| bad("key=value, e.g. learning_rate=3e-4"))?;
+    let mut v = serde_json::to_value(cfg).map_err(|e| bad(&e.to_string()))?;
+    let fields = v
+        .as_object_mut()
+        .and_then(|o| o.values_mut().next())
+        .and_then(|inner| inner.as_object_mut())
+        .ok_or_else(|| bad("unreadable configuration"))?;
+    if !fields.contains_key(key.trim()) {
+        let mut names: Vec<&String> = fields.keys().collect();
+        names.sort();
+        return Err(bad(&format!(
+            "no such hyper-parameter; valid: {}",
+            names
+                .iter()
+                .map(|s| s.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    let parsed = serde_json::from_str(value.trim())
+        .unwrap_or_else(|_| serde_json::Value::String(value.trim().to_string()));
+    fields.insert(key.trim().to_string(), parsed);
+    serde_json::from_value(v).map_err(|e| bad(&e.to_string()))
+}
+
+/// Trains (or resumes) a run; `progress` receives each iteration's metrics.
+pub fn train(
+    req: &TrainRequest,
+    mut progress: impl FnMut(&Metrics),
+) -> Result<modesuite_learn::RunSummary, String> {
+    let (cfg, _) = resolve_config(req)?;
+    let opts = MakeOptions {
+        actions: req.actions.clone(),
+        ..MakeOptions::default()
+    };
+    let vec = make::make_vec(&req.target, &opts, req.envs.max(1), req.threads)
+        .map_err(|e| e.to_string())?;
+    let mut env = SimEnv::new(vec, &req.target, req.actions.as_deref())?;
+    let note = json!({"target": req.target, "actions": req.actions, "algo": req.algo,
+                      "envs": req.envs, "command": req.command})
+    .to_string();
+    let run = RunOptions {
+        dir: req.out.clone(),
+        total_env_steps: req
+            .env_steps
+            .unwrap_or_else(|| default_env_steps(&req.algo)),
+        checkpoint_every: req.checkpoint_every,
+        resume: true,
+        note,
+    };
+    let mut observer = |m: &Metrics| {
+        progress(m);
+        Control::Continue
+    };
+    modesuite_learn::train(&cfg, &mut env, &run, &mut observer).map_err(|e| match e {
+        LearnError::Incompatible(m) => format!(
+            "{}: holds another run ({m}); choose another --out or the same settings",
+            req.out.display()
+        ),
+        other => other.to_string(),
+    })
+}
+
+/// What a policy folder says about how it was trained (its note).
+#[derive(Debug, Clone)]
+pub struct PolicyOrigin {
+    /// Task id or scene file.
+    pub target: String,
+    /// Action modes it was trained with.
+    pub actions: Option<String>,
+}
+
+/// The `policy/` folder of a run folder, or the folder itself when it holds `policy.json`.
+pub fn policy_dir(dir: &Path) -> Option<PathBuf> {
+    [dir.join("policy"), dir.to_path_buf()]
+        .into_iter()
+        .find(|d| d.join("policy.json").is_file())
+}
+
+/// Loads a learned policy and where it came from.
+pub fn load_policy(dir: &Path) -> Result<(modesuite_learn::Policy, PolicyOrigin), String> {
+    let pdir = policy_dir(dir).ok_or_else(|| {
+        format!(
+            "{}: not a policy folder (no policy.json in it or in its policy/)",
+            dir.display()
+        )
+    })?;
+    let policy = modesuite_learn::Policy::load(&pdir).map_err(|e| e.to_string())?;
+    let note: serde_json::Value = serde_json::from_str(&policy.meta().note).unwrap_or_default();
+    let target = note["target"]
+        .as_str()
+        .ok_or_else(|| format!("{}: the policy does not record its target", pdir.display()))?
+        .to_string();
+    let actions = note["actions"].as_str().map(str::to_string);
+    Ok((policy, PolicyOrigin { target, actions }))
+}
+
+/// A learned policy acting in one env (`run --policy DIR`, `eval`).
+pub struct LearnedPolicy(pub modesuite_learn::Policy);
+
+impl modesuite_tasks::expert::Policy for LearnedPolicy {
+    fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
+        let obs = env.observation();
+        if obs.len() != self.0.obs_dim() || action.len() != self.0.act_dim() {
+            return Err(format!(
+                "the policy takes {} observation values and gives {} action values; this env has {} and {}",
+                self.0.obs_dim(),
+                self.0.act_dim(),
+                obs.len(),
+                action.len()
+            ));
+        }
+        action.copy_from_slice(&self.0.act(&obs));
+        Ok(())
+    }
+}

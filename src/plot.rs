@@ -1,0 +1,269 @@
+//! `modesuite plot`: training curves of one or more runs (seeds) as a PNG, in the style of the
+//! MoDeSuite paper's figures: the mean over runs as a line and one standard deviation as a
+//! band, episode return on the left and success rate on the right, against env steps.
+//!
+//! Lines, bands and grid are drawn by `plotters` (bitmap backend); the text (title, tick
+//! values, axis names) by the renderer's built-in bitmap font, so no system font is needed.
+
+use std::path::{Path, PathBuf};
+
+use modesuite_learn::{read_metrics, Metrics};
+use plotters::prelude::*;
+
+/// One curve over a shared grid of env steps: mean and standard deviation over runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Curve {
+    /// Env steps.
+    pub x: Vec<f64>,
+    /// Mean over the runs that reached each point.
+    pub mean: Vec<f64>,
+    /// Population standard deviation over those runs.
+    pub std: Vec<f64>,
+}
+
+/// The curve of `value` over `runs` (each a run's metrics in order) on `points` env-step
+/// values from the first logged step to the last step every run reached; each run counts with
+/// its latest value at or before each point. `None` when no run has the value.
+pub fn curve(
+    runs: &[Vec<Metrics>],
+    value: fn(&Metrics) -> Option<f64>,
+    points: usize,
+) -> Option<Curve> {
+    let series: Vec<Vec<(f64, f64)>> = runs
+        .iter()
+        .map(|r| {
+            r.iter()
+                .filter_map(|m| value(m).map(|v| (m.env_steps as f64, v)))
+                .filter(|(_, v)| v.is_finite())
+                .collect::<Vec<_>>()
+        })
+        .filter(|s| !s.is_empty())
+        .collect();
+    if series.is_empty() {
+        return None;
+    }
+    let start = series.iter().map(|s| s[0].0).fold(f64::INFINITY, f64::min);
+    let end = series
+        .iter()
+        .map(|s| s[s.len() - 1].0)
+        .fold(f64::INFINITY, f64::min);
+    let points = points.max(2);
+    let mut out = Curve {
+        x: Vec::with_capacity(points),
+        mean: Vec::with_capacity(points),
+        std: Vec::with_capacity(points),
+    };
+    for k in 0..points {
+        let x = start + (end - start) * k as f64 / (points - 1) as f64;
+        let vals: Vec<f64> = series
+            .iter()
+            .filter_map(|s| s.iter().take_while(|(e, _)| *e <= x).last().map(|p| p.1))
+            .collect();
+        if vals.is_empty() {
+            continue;
+        }
+        let n = vals.len() as f64;
+        let mean = vals.iter().sum::<f64>() / n;
+        let var = vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        out.x.push(x);
+        out.mean.push(mean);
+        out.std.push(var.sqrt());
+    }
+    Some(out)
+}
+
+/// Reads the `metrics.jsonl` of each run folder.
+pub fn load_runs(dirs: &[PathBuf]) -> Result<Vec<Vec<Metrics>>, String> {
+    dirs.iter()
+        .map(|d| read_metrics(&d.join("metrics.jsonl")).map_err(|e| e.to_string()))
+        .collect()
+}
+
+const W: u32 = 1200;
+const H: u32 = 480;
+
+/// Draws the return and success curves of the runs in `dirs` into `out` (PNG), titled
+/// `title`; written atomically.
+pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), String> {
+    if dirs.is_empty() {
+        return Err("plot: give at least one run folder".into());
+    }
+    let runs = load_runs(dirs)?;
+    let ret = curve(&runs, |m| m.return_mean, 200);
+    let succ = curve(&runs, |m| m.success_rate.map(|s| 100.0 * s), 200);
+    if ret.is_none() && succ.is_none() {
+        return Err(format!(
+            "plot: no finished episodes in the metrics of {}",
+            dirs.iter()
+                .map(|d| d.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    let mut buf = vec![255u8; (W * H * 3) as usize];
+    let mut labels: Vec<(i32, i32, String)> = Vec::new();
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (W, H)).into_drawing_area();
+        let (left, right) = root.split_horizontally(W / 2);
+        let panels = [
+            (left, ret.as_ref(), "episode return", None),
+            (right, succ.as_ref(), "success rate (%)", Some((0.0, 100.0))),
+        ];
+        for (area, c, name, fixed) in panels {
+            let Some(c) = c else { continue };
+            draw_panel(&area, c, fixed, name, &mut labels).map_err(|e| format!("plot: {e}"))?;
+        }
+        root.present().map_err(|e| format!("plot: {e}"))?;
+    }
+    let caption = format!(
+        "{title}  ({} run{})",
+        dirs.len(),
+        if dirs.len() == 1 { "" } else { "s" }
+    );
+    labels.push(((W as i32 - 6 * caption.len() as i32 * 2) / 2, 4, caption));
+    for (x, y, text) in labels {
+        let (x, y) = (x.max(0) as u32, y.max(0) as u32);
+        modesuite_render::hud::draw_text(&mut buf, W, H, 3, (x, y), 2, &[text], [20, 20, 20]);
+    }
+    write_png_atomic(out, &buf)
+}
+
+type Labels = Vec<(i32, i32, String)>;
+
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    c: &Curve,
+    fixed: Option<(f64, f64)>,
+    name: &str,
+    labels: &mut Labels,
+) -> Result<(), Box<dyn std::error::Error + 'static>>
+where
+    DB::ErrorType: 'static,
+{
+    let x0 = c.x.first().copied().unwrap_or(0.0).min(0.0);
+    let x1 = c.x.last().copied().unwrap_or(1.0).max(x0 + 1.0);
+    let (y0, y1) = fixed.unwrap_or_else(|| {
+        let lo = c
+            .mean
+            .iter()
+            .zip(&c.std)
+            .map(|(m, s)| m - s)
+            .fold(f64::INFINITY, f64::min);
+        let hi = c
+            .mean
+            .iter()
+            .zip(&c.std)
+            .map(|(m, s)| m + s)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let pad = ((hi - lo) * 0.05).max(1e-6);
+        (lo - pad, hi + pad)
+    });
+    let mut chart = ChartBuilder::on(area)
+        .margin_top(64)
+        .margin_bottom(44)
+        .margin_left(90)
+        .margin_right(20)
+        .build_cartesian_2d(x0..x1, y0..y1)?;
+    let grid = RGBColor(225, 225, 225);
+    for k in 0..=5 {
+        let x = x0 + (x1 - x0) * k as f64 / 5.0;
+        let y = y0 + (y1 - y0) * k as f64 / 5.0;
+        chart.draw_series(LineSeries::new([(x, y0), (x, y1)], grid))?;
+        chart.draw_series(LineSeries::new([(x0, y), (x1, y)], grid))?;
+        let (px, py) = chart.backend_coord(&(x, y0));
+        labels.push((px - 20, py + 8, tick(x, x1 - x0)));
+        let (px, py) = chart.backend_coord(&(x0, y));
+        labels.push((px - 84, py - 8, tick(y, y1 - y0)));
+    }
+    chart.draw_series(LineSeries::new(
+        [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)],
+        BLACK,
+    ))?;
+    let band: Vec<(f64, f64)> =
+        c.x.iter()
+            .zip(c.mean.iter().zip(&c.std))
+            .map(|(x, (m, s))| (*x, (m + s).min(y1)))
+            .chain(
+                c.x.iter()
+                    .zip(c.mean.iter().zip(&c.std))
+                    .rev()
+                    .map(|(x, (m, s))| (*x, (m - s).max(y0))),
+            )
+            .collect();
+    let blue = RGBColor(31, 119, 180);
+    chart.draw_series(std::iter::once(Polygon::new(band, blue.mix(0.25).filled())))?;
+    chart.draw_series(LineSeries::new(
+        c.x.iter().copied().zip(c.mean.iter().copied()),
+        blue.stroke_width(2),
+    ))?;
+    let (px, _) = chart.backend_coord(&(x0, y1));
+    let (_, py) = chart.backend_coord(&(x0, y1));
+    labels.push((px, py - 26, name.to_string()));
+    let (px, py) = chart.backend_coord(&(x1, y0));
+    labels.push((px - 100, py + 26, "env steps".to_string()));
+    Ok(())
+}
+
+/// A tick value in a few characters, with as many decimals as a range of `span` needs
+/// (1.5M, 250k, 0.35, -12.5).
+fn tick(v: f64, span: f64) -> String {
+    let a = v.abs();
+    if span >= 5e6 || (a >= 1e6 && span >= 5e5) {
+        format!("{:.1}M", v / 1e6)
+    } else if span >= 5e3 || (a >= 1e4 && span >= 500.0) {
+        format!("{:.1}k", v / 1e3)
+    } else {
+        let decimals = (2.0 - span.max(1e-9).log10().floor()).clamp(0.0, 4.0) as usize;
+        format!("{v:.decimals$}")
+    }
+}
+
+/// Writes an RGB image as PNG through a temporary file and a rename.
+fn write_png_atomic(path: &Path, rgb: &[u8]) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| format!("{}: cannot write: {e}", path.display());
+    let tmp = path.with_extension("png.tmp");
+    {
+        let file = std::fs::File::create(&tmp).map_err(|e| err(&e))?;
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), W, H);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header().map_err(|e| err(&e))?;
+        w.write_image_data(rgb).map_err(|e| err(&e))?;
+        w.finish().map_err(|e| err(&e))?;
+    }
+    std::fs::rename(&tmp, path).map_err(|e| err(&e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn m(steps: u64, ret: f64) -> Metrics {
+        serde_json::from_value(serde_json::json!({
+            "algo": "ppo", "iteration": 1, "env_steps": steps, "wall_s": 1.0, "steps_per_s": 1.0,
+            "episodes": 1, "return_mean": ret
+        }))
+        .expect("metrics")
+    }
+
+    #[test]
+    fn ticks_show_the_digits_their_range_needs() {
+        assert_eq!(tick(1_500_000.0, 5e6), "1.5M");
+        assert_eq!(tick(250_000.0, 1e6), "250.0k");
+        assert_eq!(tick(-1702.1, 8.0), "-1702.10");
+        assert_eq!(tick(0.35, 1.0), "0.35");
+        assert_eq!(tick(80.0, 100.0), "80");
+    }
+
+    #[test]
+    fn curves_average_runs_with_their_latest_value() {
+        let runs = vec![
+            vec![m(0, 0.0), m(100, 2.0)],
+            vec![m(0, 2.0), m(50, 4.0), m(100, 6.0)],
+        ];
+        let c = curve(&runs, |m| m.return_mean, 3).unwrap();
+        assert_eq!(c.x, [0.0, 50.0, 100.0]);
+        assert_eq!(c.mean, [1.0, 2.0, 4.0]);
+        assert_eq!(c.std, [1.0, 2.0, 2.0]);
+    }
+}

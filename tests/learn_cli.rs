@@ -1,0 +1,210 @@
+//! Tests of `modesuite train`, `eval` and `plot` on a simulator task (the learners themselves
+//! are tested in `learn/`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn modesuite() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_modesuite"));
+    c.current_dir(env!("CARGO_MANIFEST_DIR"));
+    c
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("modesuite-learn-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    let _ = std::fs::remove_dir_all(&p);
+    p
+}
+
+fn ok(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "exit {:?}: {}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+fn train(dir: &Path, steps: &str, extra: &[&str]) -> String {
+    ok(modesuite()
+        .args([
+            "train",
+            "MoDe-Franka-Place-v0",
+            "--envs",
+            "4",
+            "--env-steps",
+            steps,
+        ])
+        .args(["--set", "horizon=16", "--checkpoint-every", "2", "--out"])
+        .arg(dir)
+        .args(extra))
+}
+
+fn lines(path: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+#[test]
+fn train_resume_eval_and_plot_a_task() {
+    let dir = tmp("place");
+    let out = train(&dir, "128", &[]);
+    assert!(out.contains("done: 2 iterations, 128 env steps"), "{out}");
+    for f in [
+        "config.ron",
+        "metrics.jsonl",
+        "checkpoint.bin",
+        "policy/policy.json",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    let first = lines(&dir.join("metrics.jsonl"));
+    assert_eq!(first.len(), 2);
+    // the same command with more steps continues the run
+    let out = train(&dir, "256", &[]);
+    assert!(
+        out.contains("(resumed)") && out.contains("4 iterations"),
+        "{out}"
+    );
+    let all = lines(&dir.join("metrics.jsonl"));
+    assert_eq!(all.len(), 4);
+    assert_eq!(all[..2], first[..]);
+    // a fresh run of 256 steps with the same seed ends with the same metrics (one process,
+    // the learner's order of operations is fixed)
+    let straight = tmp("straight");
+    train(&straight, "256", &[]);
+    let s = lines(&straight.join("metrics.jsonl"));
+    for (a, b) in s.iter().zip(&all) {
+        assert_eq!(a["actor_loss"], b["actor_loss"]);
+        assert_eq!(a["critic_loss"], b["critic_loss"]);
+    }
+    // another configuration is not resumed into this folder
+    let out = modesuite()
+        .args([
+            "train",
+            "MoDe-Franka-Place-v0",
+            "--envs",
+            "4",
+            "--env-steps",
+            "512",
+        ])
+        .args(["--set", "horizon=8", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("another run"), "{stderr}");
+
+    // eval prints run --json's keys, on seeds far from training's
+    let text = ok(modesuite()
+        .args(["eval"])
+        .arg(&dir)
+        .args(["--episodes", "1", "--json"]));
+    let objs: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(objs[0]["seed"], 1_000_000);
+    for key in [
+        "episode",
+        "return",
+        "length",
+        "success",
+        "error",
+        "ended",
+        "terminations",
+    ] {
+        assert!(objs[0].get(key).is_some(), "{key} missing: {}", objs[0]);
+    }
+    let summary = &objs[1];
+    assert_eq!(summary["summary"], true);
+    assert_eq!(summary["target"], "MoDe-Franka-Place-v0");
+    assert!(summary["success_rate"].is_number());
+    // run --policy DIR acts with the same policy
+    let run = ok(modesuite()
+        .args([
+            "run",
+            "MoDe-Franka-Place-v0",
+            "--steps",
+            "5",
+            "--json",
+            "--seed",
+            "1000000",
+            "--policy",
+        ])
+        .arg(dir.join("policy")));
+    let r: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
+    assert_eq!(r["length"], 5);
+
+    // plot of a run with finished episodes: a PNG of the stated size
+    let long = tmp("long");
+    ok(modesuite()
+        .args([
+            "train",
+            "MoDe-Franka-Place-v0",
+            "--envs",
+            "2",
+            "--env-steps",
+            "1280",
+        ])
+        .args(["--set", "horizon=64", "--set", "hidden=[16]", "--out"])
+        .arg(&long));
+    assert!(lines(&long.join("metrics.jsonl"))
+        .iter()
+        .any(|m| m["return_mean"].is_number()));
+    let png = long.join("curves.png");
+    ok(modesuite()
+        .args(["plot"])
+        .arg(&long)
+        .arg(&long)
+        .arg("--out")
+        .arg(&png));
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG");
+    // width and height in the IHDR chunk
+    assert_eq!(u32::from_be_bytes(bytes[16..20].try_into().unwrap()), 1200);
+    assert_eq!(u32::from_be_bytes(bytes[20..24].try_into().unwrap()), 480);
+}
+
+#[test]
+fn bad_learning_input_is_a_clear_error() {
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["train", "MoDe-Franka-Place-v0", "--algo", "dqn", "--out"],
+            "ppo or sac",
+        ),
+        (
+            &["train", "MoDe-Franka-Place-v0", "--set", "nope=1", "--out"],
+            "valid: ",
+        ),
+        (
+            &["train", "MoDe-Franka-Place-v0", "--set", "gamma=2", "--out"],
+            "gamma",
+        ),
+        (
+            &[
+                "train",
+                "MoDe-Franka-Place-v0",
+                "--actions",
+                "(discrete: true)",
+                "--out",
+            ],
+            "Discrete",
+        ),
+        (&["eval"], "not a policy folder"),
+    ];
+    for (args, expected) in cases {
+        let out = modesuite().args(args).arg(tmp("bad")).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+    }
+}
