@@ -478,8 +478,8 @@ impl Core {
             guarded(|| {
                 let start = std::time::Instant::now();
                 let mut rewards = Vec::with_capacity(shape[0] * self.n);
-                for a in actions.chunks_exact(per_step.max(1)).take(shape[0]) {
-                    let out = inner.vec.step(a)?;
+                for t in 0..shape[0] {
+                    let out = inner.vec.step(&actions[t * per_step..(t + 1) * per_step])?;
                     rewards.extend(out.rewards);
                 }
                 Ok::<_, modesuite::engine::env::VecEnvError>((
