@@ -45,6 +45,26 @@ def native_rust(task: str, n: int, threads: int, actions: np.ndarray) -> float:
     return len(actions) * n / wall
 
 
+def binding_us_per_step(n: int, steps: int = 2000, repeats: int = 5) -> tuple[float, float]:
+    """Microseconds per vector step through ``step()`` and through ``rollout()`` (no Python in
+    the loop) of ``n`` envs of the drop scene, which has almost no physics: the difference is
+    what the binding costs per step (argument checks, conversions, info dicts)."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    envs = modesuite.make_vec_env(os.path.join(root, "scenes/examples/drop.scene.ron"), n, num_threads=1)
+    a = np.zeros((n, 0), np.float32)
+    best_py = best_rs = float("inf")
+    for _ in range(repeats):
+        envs.reset(seed=0)
+        t = time.perf_counter()
+        for _ in range(steps):
+            envs.step(a)
+        best_py = min(best_py, (time.perf_counter() - t) / steps)
+        envs.reset(seed=0)
+        wall, _ = envs._core.rollout(np.zeros((steps, n, 0), np.float32))
+        best_rs = min(best_rs, wall / steps)
+    return best_py * 1e6, best_rs * 1e6
+
+
 def gym_async(task: str, n: int, actions: np.ndarray) -> float:
     envs = gym.make_vec(f"modesuite/{task}", num_envs=n, vectorization_mode="async")
     envs.reset(seed=0)
@@ -75,6 +95,13 @@ def main() -> None:
         if not args.skip_async:
             cases["gym_async"].append(gym_async(args.task, args.envs, actions))
     best = {k: max(v) for k, v in cases.items() if v}
+    py_us, rs_us = binding_us_per_step(args.envs)
+    vec_step_us = 1e6 * args.envs / best["rust_vecenv"]
+    print(json.dumps({
+        "case": "binding_us_per_step", "envs": args.envs, "python_us": round(py_us, 1),
+        "rust_us": round(rs_us, 1), "binding_us": round(py_us - rs_us, 1),
+        "share_of_task_step_pct": round(100 * (py_us - rs_us) / vec_step_us, 2),
+    }))
     for case, rates in cases.items():
         if not rates:
             continue
