@@ -1,0 +1,131 @@
+#!/usr/bin/env python3
+"""Trains and evaluates the runs behind docs/results.md, resumably (standard library only).
+
+    python3 scripts/results.py [--bin PATH] [--runs runs] [--only ppo/MoDe-Franka-Place-v0/0 ...]
+
+Each run (algorithm, task, seed) trains in chunks with `modesuite train` (the same command
+resumes it) and after each chunk its policy is evaluated with `modesuite eval` on 20 episodes
+from seed 1,000,000 (never a training seed). A line per evaluation goes to
+`runs/<algo>/<task>/seed<k>/evals.jsonl`: env steps, the run's training wall time (from its
+metrics), the success rate and mean return. A run stops at its budget or at its first
+evaluation with every episode successful. Killed at any moment, it continues where it was: a
+chunk already evaluated is not evaluated again, and training resumes from its checkpoint.
+`--table` prints the markdown table of all evaluations found.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ELASTIC = ["Place", "Drag", "Bend", "Transport", "Lift"]
+# (algo, chunk env steps, budget env steps)
+ALGOS = {"ppo": (25_600, 409_600), "sac": (20_000, 200_000)}
+# the order runs are made in: the issue's must-show rows first
+PLAN = (
+    [("ppo", "MoDe-Franka-Place-v0", s) for s in range(5)]
+    + [("ppo", "MoDe-Franka-Drag-v0", 0), ("sac", "MoDe-Franka-Place-v0", 0)]
+    + [("ppo", f"MoDe-Franka-{t}-v0", 0) for t in ELASTIC[2:]]
+    + [("ppo", f"MoDe-Spot-{t}-v0", 0) for t in ELASTIC]
+    + [("ppo", "MoDe-Franka-Drag-v0", s) for s in range(1, 5)]
+    + [("sac", f"MoDe-{r}-{t}-v0", 0) for r in ("Franka", "Spot") for t in ELASTIC
+       if (r, t) != ("Franka", "Place")]
+)
+
+
+def run_dir(root: Path, algo: str, task: str, seed: int) -> Path:
+    return root / algo / task / f"seed{seed}"
+
+
+def read_lines(path: Path) -> list[dict]:
+    if not path.is_file():
+        return []
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            pass  # a line cut by a kill
+    return out
+
+
+def append_line(path: Path, obj: dict) -> None:
+    with open(path, "a") as f:
+        f.write(json.dumps(obj) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def one_run(binary: str, root: Path, algo: str, task: str, seed: int) -> None:
+    chunk, budget = ALGOS[algo]
+    d = run_dir(root, algo, task, seed)
+    d.mkdir(parents=True, exist_ok=True)
+    evals = d / "evals.jsonl"
+    done = {e["env_steps"] for e in read_lines(evals)}
+    if any(e["success_rate"] == 1.0 for e in read_lines(evals)):
+        return
+    for target in range(chunk, budget + 1, chunk):
+        if target in done:
+            continue
+        cmd = [binary, "train", task, "--algo", algo, "--seed", str(seed),
+               "--env-steps", str(target), "--out", str(d)]
+        with open(d / "train.log", "a") as log:
+            r = subprocess.run(cmd, stdout=log, stderr=log)
+        if r.returncode != 0:
+            print(f"{d}: train failed (exit {r.returncode}); see {d / 'train.log'}", file=sys.stderr)
+            return
+        out = subprocess.run([binary, "eval", str(d), "--episodes", "20", "--json"],
+                             capture_output=True, text=True)
+        if out.returncode != 0:
+            print(f"{d}: eval failed: {out.stderr}", file=sys.stderr)
+            return
+        summary = json.loads(out.stdout.strip().splitlines()[-1])
+        metrics = read_lines(d / "metrics.jsonl")
+        line = {"env_steps": target, "train_wall_s": metrics[-1]["wall_s"] if metrics else None,
+                "success_rate": summary["success_rate"], "mean_return": summary["mean_return"],
+                "mean_length": summary["mean_length"], "errors": summary["errors"]}
+        append_line(evals, line)
+        print(f"{algo} {task} seed {seed}: {line}", flush=True)
+        if summary["success_rate"] == 1.0:
+            return
+
+
+def table(root: Path) -> str:
+    rows = ["| algo | task | seed | env steps | train wall (s) | eval success (20, seeds 1e6+) | eval return | first eval >= 90 %: env steps / train wall (s) |",
+            "|---|---|---|---|---|---|---|---|"]
+    for algo, task, seed in PLAN:
+        ev = read_lines(run_dir(root, algo, task, seed) / "evals.jsonl")
+        if not ev:
+            continue
+        last = ev[-1]
+        first = next((e for e in ev if (e["success_rate"] or 0) >= 0.9), None)
+        first_s = f"{first['env_steps']:,} / {first['train_wall_s']:.0f}" if first else "not reached"
+        rows.append(f"| {algo.upper()} | {task} | {seed} | {last['env_steps']:,} | {last['train_wall_s']:.0f} | "
+                    f"{100 * (last['success_rate'] or 0):.0f} % | {last['mean_return']:.1f} | {first_s} |")
+    return "\n".join(rows)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--bin", default=os.path.expanduser("~/.cache/modesuite-target/release/modesuite"))
+    p.add_argument("--runs", default="runs", type=Path)
+    p.add_argument("--only", nargs="*", help="algo/task/seed, e.g. ppo/MoDe-Franka-Place-v0/0")
+    p.add_argument("--table", action="store_true")
+    args = p.parse_args()
+    if args.table:
+        print(table(args.runs))
+        return
+    plan = PLAN
+    if args.only:
+        wanted = {tuple(o.split("/")) for o in args.only}
+        plan = [r for r in PLAN if (r[0], r[1], str(r[2])) in wanted]
+    for algo, task, seed in plan:
+        one_run(args.bin, args.runs, algo, task, seed)
+
+
+if __name__ == "__main__":
+    main()
