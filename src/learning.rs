@@ -34,6 +34,8 @@ pub struct SimEnv {
     identity: String,
     obs_dim: usize,
     act: ActLayout,
+    /// Seconds spent stepping and resetting the envs (the rest of a run is the learner's).
+    pub env_seconds: f64,
 }
 
 impl SimEnv {
@@ -66,6 +68,7 @@ impl SimEnv {
             identity,
             obs_dim,
             act,
+            env_seconds: 0.0,
         })
     }
 }
@@ -92,11 +95,16 @@ impl VecEnvironment for SimEnv {
     }
 
     fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
-        Ok(self.vec.reset(Some(seed)).0)
+        let t = std::time::Instant::now();
+        let obs = self.vec.reset(Some(seed)).0;
+        self.env_seconds += t.elapsed().as_secs_f64();
+        Ok(obs)
     }
 
     fn step(&mut self, actions: &[f32]) -> Result<BatchStep, String> {
+        let t = std::time::Instant::now();
         let out = self.vec.step(actions).map_err(|e| e.to_string())?;
+        self.env_seconds += t.elapsed().as_secs_f64();
         let n = out.rewards.len();
         let mut step = BatchStep {
             obs: out.observations,
@@ -241,11 +249,22 @@ pub fn set_field(cfg: &AlgoConfig, kv: &str) -> Result<AlgoConfig, String> {
     serde_json::from_value(v).map_err(|e| bad(&e.to_string()))
 }
 
+/// How a `train` call went: the learner's summary and where this call's time went.
+#[derive(Debug, Clone)]
+pub struct TrainOutcome {
+    /// The learner's summary.
+    pub summary: modesuite_learn::RunSummary,
+    /// Wall-clock seconds of this call's training (after the envs were made).
+    pub wall_seconds: f64,
+    /// Of which stepping and resetting the envs.
+    pub env_seconds: f64,
+}
+
 /// Trains (or resumes) a run; `progress` receives each iteration's metrics.
 pub fn train(
     req: &TrainRequest,
     mut progress: impl FnMut(&Metrics),
-) -> Result<modesuite_learn::RunSummary, String> {
+) -> Result<TrainOutcome, String> {
     let (cfg, _) = resolve_config(req)?;
     let opts = MakeOptions {
         actions: req.actions.clone(),
@@ -270,12 +289,19 @@ pub fn train(
         progress(m);
         Control::Continue
     };
-    modesuite_learn::train(&cfg, &mut env, &run, &mut observer).map_err(|e| match e {
-        LearnError::Incompatible(m) => format!(
-            "{}: holds another run ({m}); choose another --out or the same settings",
-            req.out.display()
-        ),
-        other => other.to_string(),
+    let start = std::time::Instant::now();
+    let summary =
+        modesuite_learn::train(&cfg, &mut env, &run, &mut observer).map_err(|e| match e {
+            LearnError::Incompatible(m) => format!(
+                "{}: holds another run ({m}); choose another --out or the same settings",
+                req.out.display()
+            ),
+            other => other.to_string(),
+        })?;
+    Ok(TrainOutcome {
+        summary,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        env_seconds: env.env_seconds,
     })
 }
 

@@ -118,7 +118,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     )
     .map_err(io)?;
     let tty = std::io::stderr().is_terminal();
-    let summary = learning::train(&req, |m| {
+    let outcome = learning::train(&req, |m| {
         let line = m.progress_line(total);
         if tty {
             eprint!("\r{line:<150}");
@@ -130,6 +130,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     if tty {
         eprintln!();
     }
+    let summary = outcome.summary;
     writeln!(
         out,
         "done: {} iterations, {} env steps{}; last: {}",
@@ -139,6 +140,16 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         summary
             .last
             .map_or("-".to_string(), |m| m.progress_line(total))
+    )
+    .map_err(io)?;
+    let learner = outcome.wall_seconds - outcome.env_seconds;
+    writeln!(
+        out,
+        "time: {:.1} s, of which envs {:.1} s and learner {:.1} s ({:.1} %)",
+        outcome.wall_seconds,
+        outcome.env_seconds,
+        learner,
+        100.0 * learner / outcome.wall_seconds.max(1e-9)
     )
     .map_err(io)?;
     Ok(())
