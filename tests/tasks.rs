@@ -99,6 +99,26 @@ fn place_app(text: &str) -> modesuite::engine::SimApp {
 }
 
 #[test]
+fn extends_cannot_leave_the_scene_folder() {
+    for bad in [
+        "../place/place.task.ron",
+        "/etc/passwd",
+        "sub/../../x.task.ron",
+        "place.ron",
+    ] {
+        let text = format!(
+            "(objects: [(name: \"ground\", shape: Plane(size: (2.0, 2.0)), body: Static)],
+              extensions: {{\"task\": (extends: \"{bad}\")}})"
+        );
+        let e = match modesuite::make::env_from_text(&text) {
+            Ok(_) => panic!("{bad}: accepted"),
+            Err(e) => e.to_string(),
+        };
+        assert!(e.contains("without `..`") && e.contains(bad), "{bad}: {e}");
+    }
+}
+
+#[test]
 fn ids_resolve_and_unimplemented_ones_say_so() {
     let ids = modesuite::tasks::all_ids();
     assert_eq!(ids.len(), 16);

@@ -408,6 +408,17 @@ fn load_extends(
     if depth > 8 {
         return Err(serr(path, file, "at most 8 levels of `extends`"));
     }
+    // a scene names task files beside it or in its subfolders, never elsewhere on the machine
+    let inside = Path::new(file)
+        .components()
+        .all(|c| matches!(c, std::path::Component::Normal(_)));
+    if !inside || !file.ends_with(".task.ron") {
+        return Err(serr(
+            path,
+            file,
+            "a `*.task.ron` file in the scene's folder or below it (a relative path without `..`)",
+        ));
+    }
     let full = base_dir.join(file);
     let text = match full
         .to_str()
