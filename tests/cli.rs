@@ -1,29 +1,13 @@
 //! Tests of the `modesuite` command line (its public contracts).
 
-use std::process::Command;
+mod common;
 
-fn modesuite() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_modesuite"));
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c
-}
+use common::{modesuite_cmd as modesuite, stdout_ok};
 
 fn tmp(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("modesuite-cli-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
-}
-
-/// Runs `cmd`, asserts that it succeeded (showing its stderr if not) and returns its stdout.
-fn stdout_ok(cmd: &mut Command) -> String {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "exit {:?}: {}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
 }
 
 #[test]

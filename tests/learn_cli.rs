@@ -2,13 +2,9 @@
 //! are tested in `learn/`).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
-fn modesuite() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_modesuite"));
-    c.current_dir(env!("CARGO_MANIFEST_DIR"));
-    c
-}
+use common::{modesuite_cmd as modesuite, stdout_ok};
 
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("modesuite-learn-test-{}", std::process::id()));
@@ -18,30 +14,21 @@ fn tmp(name: &str) -> PathBuf {
     p
 }
 
-fn ok(cmd: &mut Command) -> String {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "exit {:?}: {}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
-
 fn train(dir: &Path, steps: &str, extra: &[&str]) -> String {
-    ok(modesuite()
-        .args([
-            "train",
-            "MoDe-Franka-Place-v0",
-            "--envs",
-            "4",
-            "--env-steps",
-            steps,
-        ])
-        .args(["--set", "horizon=16", "--checkpoint-every", "2", "--out"])
-        .arg(dir)
-        .args(extra))
+    stdout_ok(
+        modesuite()
+            .args([
+                "train",
+                "MoDe-Franka-Place-v0",
+                "--envs",
+                "4",
+                "--env-steps",
+                steps,
+            ])
+            .args(["--set", "horizon=16", "--checkpoint-every", "2", "--out"])
+            .arg(dir)
+            .args(extra),
+    )
 }
 
 fn lines(path: &Path) -> Vec<serde_json::Value> {
@@ -104,10 +91,12 @@ fn train_resume_eval_and_plot_a_task() {
     assert!(stderr.contains("another run"), "{stderr}");
 
     // eval prints run --json's keys, on seeds far from training's
-    let text = ok(modesuite()
-        .args(["eval"])
-        .arg(&dir)
-        .args(["--episodes", "1", "--json"]));
+    let text = stdout_ok(
+        modesuite()
+            .args(["eval"])
+            .arg(&dir)
+            .args(["--episodes", "1", "--json"]),
+    );
     let objs: Vec<serde_json::Value> = text
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
@@ -129,44 +118,50 @@ fn train_resume_eval_and_plot_a_task() {
     assert_eq!(summary["target"], "MoDe-Franka-Place-v0");
     assert!(summary["success_rate"].is_number());
     // run --policy DIR acts with the same policy
-    let run = ok(modesuite()
-        .args([
-            "run",
-            "MoDe-Franka-Place-v0",
-            "--steps",
-            "5",
-            "--json",
-            "--seed",
-            "1000000",
-            "--policy",
-        ])
-        .arg(dir.join("policy")));
+    let run = stdout_ok(
+        modesuite()
+            .args([
+                "run",
+                "MoDe-Franka-Place-v0",
+                "--steps",
+                "5",
+                "--json",
+                "--seed",
+                "1000000",
+                "--policy",
+            ])
+            .arg(dir.join("policy")),
+    );
     let r: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
     assert_eq!(r["length"], 5);
 
     // plot of a run with finished episodes: a PNG of the stated size
     let long = tmp("long");
-    ok(modesuite()
-        .args([
-            "train",
-            "MoDe-Franka-Place-v0",
-            "--envs",
-            "2",
-            "--env-steps",
-            "1280",
-        ])
-        .args(["--set", "horizon=64", "--set", "hidden=[16]", "--out"])
-        .arg(&long));
+    stdout_ok(
+        modesuite()
+            .args([
+                "train",
+                "MoDe-Franka-Place-v0",
+                "--envs",
+                "2",
+                "--env-steps",
+                "1280",
+            ])
+            .args(["--set", "horizon=64", "--set", "hidden=[16]", "--out"])
+            .arg(&long),
+    );
     assert!(lines(&long.join("metrics.jsonl"))
         .iter()
         .any(|m| m["return_mean"].is_number()));
     let png = long.join("curves.png");
-    ok(modesuite()
-        .args(["plot"])
-        .arg(&long)
-        .arg(&long)
-        .arg("--out")
-        .arg(&png));
+    stdout_ok(
+        modesuite()
+            .args(["plot"])
+            .arg(&long)
+            .arg(&long)
+            .arg("--out")
+            .arg(&png),
+    );
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[1..4], b"PNG");
     // width and height in the IHDR chunk
