@@ -29,8 +29,11 @@ def main() -> None:
     args = p.parse_args()
 
     from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    env = VecAdapter(modesuite.make_vec_env(args.task, args.envs))
+    # VecMonitor: episode returns and lengths in SB3's logs (ep_rew_mean); VecNormalize:
+    # observation and reward scaling (the task's returns are in the thousands)
+    env = VecNormalize(VecMonitor(VecAdapter(modesuite.make_vec_env(args.task, args.envs))))
     env.seed(args.seed)
     model = PPO(
         "MlpPolicy",
@@ -47,12 +50,13 @@ def main() -> None:
     )
     model.learn(total_timesteps=args.steps)
 
+    env.training = False  # freeze the observation statistics for evaluation
     evaluation = modesuite.make_vec_env(args.task, 1, num_threads=1)
     successes = []
     for ep in range(args.eval_episodes):
         obs, _ = evaluation.reset(seed=1000 + ep)
         while True:
-            action, _ = model.predict(obs, deterministic=True)
+            action, _ = model.predict(env.normalize_obs(obs), deterministic=True)
             obs, _, term, trunc, info = evaluation.step(action)
             if term[0] or trunc[0]:
                 successes.append(bool(info["final_info"].get("is_success", [False])[0]))
