@@ -8,7 +8,8 @@ resumes it) and after each chunk its policy is evaluated with `modesuite eval` o
 from seed 1,000,000 (never a training seed). A line per evaluation goes to
 `runs/<algo>/<task>/seed<k>/evals.jsonl`: env steps, the run's training wall time (from its
 metrics), the success rate and mean return. A run stops at its budget or at its first
-evaluation with every episode successful. Killed at any moment, it continues where it was: a
+evaluation with every episode successful; the policy of its best evaluation so far is kept in
+`best_policy/` (with `eval.json`), since a later chunk can do worse (SAC especially). Killed at any moment, it continues where it was: a
 chunk already evaluated is not evaluated again, and training resumes from its checkpoint.
 `--table` prints the markdown table of all evaluations found.
 """
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -89,7 +91,15 @@ def one_run(binary: str, root: Path, algo: str, task: str, seed: int) -> None:
         line = {"env_steps": target, "train_wall_s": metrics[-1]["wall_s"] if metrics else None,
                 "success_rate": summary["success_rate"], "mean_return": summary["mean_return"],
                 "mean_length": summary["mean_length"], "errors": summary["errors"]}
+        best = max((e["success_rate"] or 0 for e in read_lines(evals)), default=-1.0)
         append_line(evals, line)
+        if (summary["success_rate"] or 0) > best or not (d / "best_policy").is_dir():
+            # keep the policy of the best evaluation: SAC in particular can fall back later
+            shutil.rmtree(d / "best_policy.tmp", ignore_errors=True)
+            shutil.copytree(d / "policy", d / "best_policy.tmp")
+            (d / "best_policy.tmp" / "eval.json").write_text(json.dumps(line) + "\n")
+            shutil.rmtree(d / "best_policy", ignore_errors=True)
+            os.rename(d / "best_policy.tmp", d / "best_policy")
         print(f"{algo} {task} seed {seed}: {line}", flush=True)
         if summary["success_rate"] == 1.0:
             return
