@@ -26,14 +26,19 @@ pub const EVAL_SEED: u64 = 1_000_000;
 
 /// A [`VecEnv`] of state observations and continuous actions, as the learners see it.
 ///
-/// An episode that ends in an error (a physics blow-up, a non-finite action) counts as
-/// terminated for the learner (no value is bootstrapped from a state that blew up) and its
-/// final observation's non-finite values are zeroed.
+/// An episode that ends in an error (a physics blow-up, a non-finite action) is cut short by
+/// the simulator, not by the task: the learner sees it truncated, with the last observation
+/// before the failing step as its final observation, so the return goes on from that state's
+/// value. Counted as terminal instead, a blow-up ended the per-step penalties of the tasks'
+/// distance rewards, and PPO on Franka Drag learned to blow the belt up (19 of 20 evaluation
+/// episodes ended in errors after 25,600 steps).
 pub struct SimEnv {
     vec: VecEnv,
     identity: String,
     obs_dim: usize,
     act: ActLayout,
+    /// Each env's observation before the current step (for episodes that end in errors).
+    last_obs: Vec<f32>,
     /// Seconds spent stepping and resetting the envs (the rest of a run is the learner's).
     pub env_seconds: f64,
 }
@@ -68,6 +73,7 @@ impl SimEnv {
             identity,
             obs_dim,
             act,
+            last_obs: Vec::new(),
             env_seconds: 0.0,
         })
     }
@@ -98,6 +104,7 @@ impl VecEnvironment for SimEnv {
         let t = std::time::Instant::now();
         let obs = self.vec.reset(Some(seed)).0;
         self.env_seconds += t.elapsed().as_secs_f64();
+        self.last_obs.clone_from(&obs);
         Ok(obs)
     }
 
@@ -114,14 +121,18 @@ impl VecEnvironment for SimEnv {
             final_obs: Vec::with_capacity(n),
             success: Vec::with_capacity(n),
         };
+        let dim = self.obs_dim;
         for (i, info) in out.infos.into_iter().enumerate() {
-            if info.error.is_some() {
-                step.terminated[i] = true;
-                step.truncated[i] = false;
-            }
             // an episode ended by an error failed, where the task defines success
             step.success
                 .push(info.episode.and_then(|e| e.success.map(|s| s && !e.error)));
+            if info.error.is_some() {
+                step.terminated[i] = false;
+                step.truncated[i] = true;
+                let before = self.last_obs.get(i * dim..(i + 1) * dim);
+                step.final_obs.push(before.map(<[f32]>::to_vec));
+                continue;
+            }
             step.final_obs.push(info.final_observation.map(|mut o| {
                 for v in o.iter_mut().filter(|v| !v.is_finite()) {
                     *v = 0.0;
@@ -134,6 +145,7 @@ impl VecEnvironment for SimEnv {
         for v in step.obs.iter_mut().filter(|v| !v.is_finite()) {
             *v = 0.0;
         }
+        self.last_obs.clone_from(&step.obs);
         Ok(step)
     }
 }

@@ -203,3 +203,28 @@ fn bad_learning_input_is_a_clear_error() {
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
     }
 }
+
+#[test]
+fn an_episode_ended_by_an_error_is_a_cut_that_bootstraps_from_the_state_before() {
+    use modesuite::learn::VecEnvironment;
+    let vec = modesuite::make::make_vec(
+        "MoDe-Franka-Place-v0",
+        &modesuite::make::MakeOptions::default(),
+        2,
+        1,
+    )
+    .unwrap();
+    let mut env = modesuite::learning::SimEnv::new(vec, "MoDe-Franka-Place-v0", None).unwrap();
+    env.reset(0).unwrap();
+    let zero = vec![0.0f32; 2 * env.act_dim()];
+    let s1 = env.step(&zero).unwrap();
+    let mut bad = zero.clone();
+    bad[0] = f32::NAN;
+    let s2 = env.step(&bad).unwrap();
+    assert_eq!((s2.terminated[0], s2.truncated[0]), (false, true));
+    assert_eq!((s2.terminated[1], s2.truncated[1]), (false, false));
+    let dim = env.obs_dim();
+    assert_eq!(s2.final_obs[0].as_deref(), Some(&s1.obs[..dim]));
+    assert!(s2.final_obs[1].is_none());
+    assert!(s2.obs.iter().all(|v| v.is_finite()));
+}
