@@ -19,13 +19,14 @@ if not any(k in os.environ for k in ("XDG_RUNTIME_DIR", "NODEVICE_SELECT", "MESA
     os.environ["NODEVICE_SELECT"] = "1"
 
 from . import _core  # noqa: E402
-from ._core import SceneError  # noqa: E402
+from ._core import Policy, SceneError  # noqa: E402
 from .envs import OBS_MODES, ModeSuiteEnv, ModeSuiteVectorEnv  # noqa: E402
 
 __all__ = [
     "ModeSuiteEnv",
     "ModeSuiteVectorEnv",
     "OBS_MODES",
+    "Policy",
     "SceneError",
     "TASK_IDS",
     "make_env",

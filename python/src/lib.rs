@@ -17,7 +17,9 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{
+    PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyNotImplementedError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -27,7 +29,7 @@ use modesuite::gym::info::{reset_info, Batch, EpisodeTracker, InfoValue};
 use modesuite::gym::layout::{ActLayout, ObsLayout};
 use modesuite::make::{self, MakeError, MakeOptions};
 use modesuite::render::{CameraDesc, EnvRenderer, Orbit};
-use modesuite::tasks::expert::{make_policy, Policy, PolicyKind};
+use modesuite::tasks::expert::{make_policy, Policy as ExpertPolicy, PolicyKind};
 
 pyo3::create_exception!(
     _core,
@@ -83,7 +85,7 @@ struct Inner {
     /// The observation of each env after the last call (`n x dim`).
     last_obs: Vec<f32>,
     /// The scripted expert of each env (made on first use) and whether its env was reset since.
-    experts: Vec<Option<Box<dyn Policy>>>,
+    experts: Vec<Option<Box<dyn ExpertPolicy>>>,
     expert_reset: Vec<Option<u64>>,
     renderer: Option<EnvRenderer>,
     cameras: Vec<Option<CameraDesc>>,
@@ -533,6 +535,78 @@ impl Core {
     }
 }
 
+/// A trained policy (`modesuite train --out DIR`, or a folder of `policies/`): the deterministic
+/// action (the mean) for observations of the task it was trained on.
+#[pyclass(module = "modesuite._core")]
+pub struct Policy {
+    inner: modesuite::learn::Policy,
+    origin: modesuite::learning::PolicyOrigin,
+}
+
+#[pymethods]
+impl Policy {
+    /// Loads the policy of a run folder or policy folder.
+    #[new]
+    fn new(dir: PathBuf) -> PyResult<Self> {
+        let (inner, origin) =
+            modesuite::learning::load_policy(&dir).map_err(SceneError::new_err)?;
+        Ok(Self { inner, origin })
+    }
+
+    /// Actions (float32) for observations: one `(obs_dim,)` or a batch `(n, obs_dim)`.
+    fn act<'py>(&self, py: Python<'py>, obs: PyReadonlyArrayDyn<'py, f32>) -> PyResult<Py<PyAny>> {
+        let shape = obs.shape().to_vec();
+        let (rows, dim) = match shape.as_slice() {
+            [d] => (None, *d),
+            [n, d] => (Some(*n), *d),
+            _ => (None, usize::MAX),
+        };
+        if dim != self.inner.obs_dim() {
+            return Err(PyValueError::new_err(format!(
+                "observations of shape {shape:?}: expected ({0},) or (n, {0})",
+                self.inner.obs_dim()
+            )));
+        }
+        let data = obs.as_slice()?;
+        let actions = py.detach(|| self.inner.act(data));
+        let act_dim = self.inner.act_dim();
+        match rows {
+            Some(n) => convert::array(py, actions, &[n, act_dim]),
+            None => convert::array(py, actions, &[act_dim]),
+        }
+    }
+
+    /// The task id or scene file it was trained on.
+    #[getter]
+    fn target(&self) -> String {
+        self.origin.target.clone()
+    }
+
+    /// The action modes it was trained with (RON), or None for the scene's.
+    #[getter]
+    fn actions(&self) -> Option<String> {
+        self.origin.actions.clone()
+    }
+
+    /// `ppo` or `sac`.
+    #[getter]
+    fn algo(&self) -> String {
+        self.inner.meta().algo.clone()
+    }
+
+    /// Observation values it takes.
+    #[getter]
+    fn obs_dim(&self) -> usize {
+        self.inner.obs_dim()
+    }
+
+    /// Action values it gives.
+    #[getter]
+    fn act_dim(&self) -> usize {
+        self.inner.act_dim()
+    }
+}
+
 /// The 16 task ids, `MoDe-<Robot>-<Task>-v0`.
 #[pyfunction]
 fn task_ids() -> Vec<String> {
@@ -557,6 +631,7 @@ fn _panic_for_test(message: &str) -> PyResult<()> {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Core>()?;
+    m.add_class::<Policy>()?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add_function(wrap_pyfunction!(task_ids, m)?)?;
     m.add_function(wrap_pyfunction!(scene_episode_steps, m)?)?;

@@ -66,3 +66,22 @@ def test_experts_of_a_vector_env_match_single_envs() -> None:
             e.step(a[i])
         venv.step(a)
     assert venv.state_hashes() == [e.state_hash() for e in singles]
+
+
+def test_a_shipped_trained_policy_solves_its_task(root: Path) -> None:
+    policy = modesuite.Policy(root / "policies/ppo/MoDe-Franka-Place-v0")
+    assert (policy.target, policy.algo) == ("MoDe-Franka-Place-v0", "ppo")
+    env = gym.make(f"modesuite/{policy.target}")
+    obs, _ = env.reset(seed=1_000_000)
+    for _ in range(600):
+        obs, _, terminated, truncated, info = env.step(policy.act(obs.astype(np.float32)))
+        if terminated or truncated:
+            break
+    print(f"trained PPO policy from Python: ended {info['ended']}")
+    assert info["ended"] == "success"
+    batch = policy.act(np.zeros((3, policy.obs_dim), np.float32))
+    assert batch.shape == (3, policy.act_dim)
+    with pytest.raises(ValueError, match="expected"):
+        policy.act(np.zeros(policy.obs_dim + 1, np.float32))
+    with pytest.raises(modesuite.SceneError, match="not a policy folder"):
+        modesuite.Policy(root / "scenes")
