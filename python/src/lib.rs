@@ -96,7 +96,8 @@ struct Inner {
 /// N environments of one target (a task id or a scene file) stepped together.
 #[pyclass(module = "modesuite._core")]
 pub struct Core {
-    inner: Mutex<Inner>,
+    // boxed: Python allocates objects 16-byte aligned, whatever the envs' alignment is
+    inner: Mutex<Box<Inner>>,
     n: usize,
     threads: usize,
     episode_steps: Option<u64>,
@@ -104,7 +105,7 @@ pub struct Core {
 }
 
 impl Core {
-    fn lock(&self) -> PyResult<MutexGuard<'_, Inner>> {
+    fn lock(&self) -> PyResult<MutexGuard<'_, Box<Inner>>> {
         let g = self
             .inner
             .lock()
@@ -173,7 +174,7 @@ impl Core {
         let threads = vec.threads();
         let episode_steps = episode_steps.or(model.episode_steps);
         Ok(Self {
-            inner: Mutex::new(Inner {
+            inner: Mutex::new(Box::new(Inner {
                 vec,
                 model,
                 obs,
@@ -188,7 +189,7 @@ impl Core {
                 renderer: None,
                 cameras: vec![None; num_envs],
                 poisoned: None,
-            }),
+            })),
             n: num_envs,
             threads,
             episode_steps,
@@ -539,7 +540,8 @@ impl Core {
 /// action (the mean) for observations of the task it was trained on.
 #[pyclass(module = "modesuite._core")]
 pub struct Policy {
-    inner: modesuite::learn::Policy,
+    // boxed: burn's buffers are 64-byte aligned and Python allocates objects 16-byte aligned
+    inner: Box<modesuite::learn::Policy>,
     origin: modesuite::learning::PolicyOrigin,
 }
 
@@ -550,7 +552,10 @@ impl Policy {
     fn new(dir: PathBuf) -> PyResult<Self> {
         let (inner, origin) =
             modesuite::learning::load_policy(&dir).map_err(SceneError::new_err)?;
-        Ok(Self { inner, origin })
+        Ok(Self {
+            inner: Box::new(inner),
+            origin,
+        })
     }
 
     /// Actions (float32) for observations: one `(obs_dim,)` or a batch `(n, obs_dim)`.
