@@ -14,22 +14,26 @@ fn tmp(name: &str) -> PathBuf {
     p
 }
 
-fn train(dir: &Path, steps: &str, extra: &[&str]) -> String {
+/// `train` of Franka Place into `dir` with `envs` envs for `steps` env steps and `extra` flags.
+fn train(dir: &Path, envs: &str, steps: &str, extra: &[&str]) -> String {
     stdout_ok(
         modesuite()
             .args([
                 "train",
                 "MoDe-Franka-Place-v0",
                 "--envs",
-                "4",
+                envs,
                 "--env-steps",
                 steps,
             ])
-            .args(["--set", "horizon=16", "--checkpoint-every", "2", "--out"])
-            .arg(dir)
-            .args(extra),
+            .args(extra)
+            .arg("--out")
+            .arg(dir),
     )
 }
+
+/// The short runs' settings: small rollouts, a checkpoint every two iterations.
+const SHORT: &[&str] = &["--set", "horizon=16", "--checkpoint-every", "2"];
 
 fn lines(path: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(path)
@@ -42,7 +46,7 @@ fn lines(path: &Path) -> Vec<serde_json::Value> {
 #[test]
 fn train_resume_eval_and_plot_a_task() {
     let dir = tmp("place");
-    let out = train(&dir, "128", &[]);
+    let out = train(&dir, "4", "128", SHORT);
     assert!(out.contains("done: 2 iterations, 128 env steps"), "{out}");
     for f in [
         "config.ron",
@@ -55,7 +59,7 @@ fn train_resume_eval_and_plot_a_task() {
     let first = lines(&dir.join("metrics.jsonl"));
     assert_eq!(first.len(), 2);
     // the same command with more steps continues the run
-    let out = train(&dir, "256", &[]);
+    let out = train(&dir, "4", "256", SHORT);
     assert!(
         out.contains("(resumed)") && out.contains("4 iterations"),
         "{out}"
@@ -66,7 +70,7 @@ fn train_resume_eval_and_plot_a_task() {
     // a fresh run of 256 steps with the same seed ends with the same metrics (one process,
     // the learner's order of operations is fixed)
     let straight = tmp("straight");
-    train(&straight, "256", &[]);
+    train(&straight, "4", "256", SHORT);
     let s = lines(&straight.join("metrics.jsonl"));
     for (a, b) in s.iter().zip(&all) {
         assert_eq!(a["actor_loss"], b["actor_loss"]);
@@ -137,18 +141,11 @@ fn train_resume_eval_and_plot_a_task() {
 
     // plot of a run with finished episodes: a PNG of the stated size
     let long = tmp("long");
-    stdout_ok(
-        modesuite()
-            .args([
-                "train",
-                "MoDe-Franka-Place-v0",
-                "--envs",
-                "2",
-                "--env-steps",
-                "1280",
-            ])
-            .args(["--set", "horizon=64", "--set", "hidden=[16]", "--out"])
-            .arg(&long),
+    train(
+        &long,
+        "2",
+        "1280",
+        &["--set", "horizon=64", "--set", "hidden=[16]"],
     );
     assert!(lines(&long.join("metrics.jsonl"))
         .iter()

@@ -24,7 +24,7 @@ use crate::metrics::{EpisodeTracker, Metrics};
 use crate::nets::{clip_grad_norm, flat_params, Dense, Mlp};
 use crate::normalize::RunningMeanStd;
 use crate::rng::Rng;
-use crate::runner::{check_step, gather_rows, rescale, EnvShape, Trainer};
+use crate::runner::{check_step, gather_rows, rescale, restart, EnvShape, Trainer};
 use crate::tensors::{scalar, tensor1, tensor2, to_vec};
 use crate::{LearnError, VecEnvironment};
 
@@ -540,11 +540,13 @@ impl Trainer for Ppo {
 
     fn restart_episodes(&mut self, env: &mut dyn VecEnvironment) -> Result<(), LearnError> {
         self.resets += 1;
-        self.obs = env
-            .reset(Rng::derive(self.cfg.seed, self.resets).next_u64())
-            .map_err(LearnError::Env)?;
-        self.shape.check_obs(&self.obs, "reset")?;
-        self.tracker.restart();
+        self.obs = restart(
+            env,
+            self.cfg.seed,
+            self.resets,
+            &self.shape,
+            &mut self.tracker,
+        )?;
         Ok(())
     }
 

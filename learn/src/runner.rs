@@ -80,6 +80,24 @@ impl EnvShape {
     }
 }
 
+/// Resets every env for the `resets`-th restart of a run seeded with `seed` (a seed derived from
+/// both, so interrupted and uninterrupted runs restart alike), checks the observations and
+/// starts the episode bookkeeping over; returns the observations.
+pub(crate) fn restart(
+    env: &mut dyn VecEnvironment,
+    seed: u64,
+    resets: u64,
+    shape: &EnvShape,
+    tracker: &mut crate::metrics::EpisodeTracker,
+) -> Result<Vec<f32>, LearnError> {
+    let obs = env
+        .reset(crate::rng::Rng::derive(seed, resets).next_u64())
+        .map_err(LearnError::Env)?;
+    shape.check_obs(&obs, "reset")?;
+    tracker.restart();
+    Ok(obs)
+}
+
 /// Checks a step's lengths and values (final observations present where episodes ended).
 pub fn check_step(shape: &EnvShape, s: &BatchStep) -> Result<(), LearnError> {
     shape.check_obs(&s.obs, "step")?;

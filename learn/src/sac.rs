@@ -15,7 +15,7 @@ use crate::metrics::{EpisodeTracker, Metrics};
 use crate::nets::{clip_grad_norm, flat_params, polyak, Dense, Mlp};
 use crate::ppo::{load_record, rec_err, record_bytes};
 use crate::rng::Rng;
-use crate::runner::{check_step, rescale, EnvShape, Trainer};
+use crate::runner::{check_step, rescale, restart, EnvShape, Trainer};
 use crate::tensors::{scalar, tensor1, tensor2, to_vec};
 use crate::{LearnError, VecEnvironment};
 
@@ -633,11 +633,13 @@ impl Trainer for Sac {
 
     fn restart_episodes(&mut self, env: &mut dyn VecEnvironment) -> Result<(), LearnError> {
         self.resets += 1;
-        self.obs = env
-            .reset(Rng::derive(self.cfg.seed, self.resets).next_u64())
-            .map_err(LearnError::Env)?;
-        self.shape.check_obs(&self.obs, "reset")?;
-        self.tracker.restart();
+        self.obs = restart(
+            env,
+            self.cfg.seed,
+            self.resets,
+            &self.shape,
+            &mut self.tracker,
+        )?;
         Ok(())
     }
 
