@@ -9,6 +9,10 @@
 //!   `--video FILE.gif|FILE.mp4` records the episodes (MP4 needs ffmpeg) and `--frames DIR` writes
 //!   PNG frames, from `--camera NAME` (a camera of the scene's render section) or a default orbit
 //!   camera framing the scene; recording never changes the simulation.
+//! - `run --save-state FILE` writes the complete state after the last step (a versioned binary
+//!   file, [`modesuite_engine::checkpoint`]); `run --load-state FILE` starts the first episode
+//!   from it, so `--steps 100 --save-state F` then `--load-state F --steps 100` ends in the
+//!   state of `--steps 200` bit for bit (with a stateless policy: zero or trained).
 //! - `modesuite bench NAME [--json]`: with `--json`, one JSON object per line per case with at
 //!   least `case`, `steps_per_s`, `threads`, `envs` (for `bench render`, images per second).
 //! - `modesuite view SCENE_OR_TASK [--seed S] [--record FILE.json]`: the interactive viewer.
@@ -29,11 +33,12 @@ use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
 
 pub mod learn;
+mod record;
 
 use crate::episode::{final_success, EpisodeEnd};
 use crate::make::{self, load_plugins, MakeError, MakeOptions};
-use modesuite_render::video::{write_frame_png, VideoWriter};
-use modesuite_render::{CameraDesc, EnvRenderer, Orbit, RenderConfig, RenderError};
+use modesuite_render::RenderConfig;
+use record::{parse_size, render_err, Recorder};
 
 /// Command-line arguments.
 #[derive(Parser, Debug)]
@@ -112,6 +117,16 @@ pub struct RunArgs {
     /// Write the final state (modesuite.state.v1 JSON) to this file.
     #[arg(long)]
     pub dump_state: Option<PathBuf>,
+    /// Write the complete state after the last step to this binary state file (written
+    /// atomically), to continue the episode later with `--load-state`.
+    #[arg(long, value_name = "FILE")]
+    pub save_state: Option<PathBuf>,
+    /// Start the first episode from this state file (`--save-state` of the same target,
+    /// plugins and build) instead of resetting it; `--steps` more steps follow. Later episodes
+    /// reset as usual. The policy starts afresh: zero and trained policies continue exactly,
+    /// `random` and `scripted` keep their own state outside the env.
+    #[arg(long, value_name = "FILE")]
+    pub load_state: Option<PathBuf>,
     /// Print one JSON object per episode and a summary object.
     #[arg(long)]
     pub json: bool,
@@ -274,6 +289,8 @@ fn run_default(out: &mut dyn Write) -> Result<(), CliError> {
         seed: 0,
         episodes: 1,
         dump_state: None,
+        save_state: None,
+        load_state: None,
         json: false,
         plugin: Vec::new(),
         video: Some(video),
@@ -482,168 +499,6 @@ fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
     run_scene(made, args, out)
 }
 
-/// Parses `WIDTHxHEIGHT`.
-fn parse_size(flag: &str, s: &str) -> Result<(u32, u32), CliError> {
-    let bad = || {
-        CliError::input(format!(
-            "{flag} = {s:?}: WIDTHxHEIGHT in pixels, each in 1..=8192, e.g. 480x320"
-        ))
-    };
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let w: u32 = w.trim().parse().map_err(|_| bad())?;
-    let h: u32 = h.trim().parse().map_err(|_| bad())?;
-    if !(1..=8192).contains(&w) || !(1..=8192).contains(&h) {
-        return Err(bad());
-    }
-    Ok((w, h))
-}
-
-fn render_err(e: RenderError) -> CliError {
-    MakeError::from(e).into()
-}
-
-/// Records frames of a run into a video and/or PNG files.
-struct Recorder {
-    renderer: EnvRenderer,
-    camera: Option<CameraDesc>,
-    camera_name: Option<String>,
-    size: (u32, u32),
-    video_path: Option<PathBuf>,
-    video: Option<VideoWriter>,
-    frames_dir: Option<PathBuf>,
-    every: u64,
-    fps: f64,
-    written: u64,
-    overlays: bool,
-}
-
-impl Recorder {
-    fn new(model: &std::sync::Arc<SceneModel>, args: &RunArgs) -> Result<Option<Self>, CliError> {
-        if args.video.is_none() && args.frames.is_none() {
-            if args.camera.is_some() {
-                return Err(CliError::input(
-                    "--camera: only used with --video or --frames",
-                ));
-            }
-            return Ok(None);
-        }
-        let size = parse_size("--video-size", &args.video_size)?;
-        if let Some(dir) = &args.frames {
-            std::fs::create_dir_all(dir).map_err(|e| {
-                CliError::runtime(format!("--frames {}: cannot create: {e}", dir.display()))
-            })?;
-        }
-        let renderer = EnvRenderer::for_scene(model.clone()).map_err(render_err)?;
-        if let Some(name) = &args.camera {
-            renderer.scene_camera(name).map_err(render_err)?;
-        }
-        // About 30 frames per second of simulated time.
-        let step_dt = model.settings.dt * model.settings.decimation as f64;
-        let every = ((1.0 / (30.0 * step_dt)).round() as u64).max(1);
-        Ok(Some(Self {
-            renderer,
-            camera: None,
-            camera_name: args.camera.clone(),
-            size,
-            video_path: args.video.clone(),
-            video: None,
-            frames_dir: args.frames.clone(),
-            every,
-            fps: 1.0 / (every as f64 * step_dt),
-            written: 0,
-            overlays: args.overlays,
-        }))
-    }
-
-    /// Renders and writes the current frame when `step` is on the recording stride; with
-    /// `--overlays` also the markers and the text `status` makes (only called then).
-    fn capture(
-        &mut self,
-        world: &World,
-        step: u64,
-        status: impl FnOnce() -> String,
-    ) -> Result<(), CliError> {
-        if !step.is_multiple_of(self.every) {
-            return Ok(());
-        }
-        let mut cam = match (&self.camera, &self.camera_name) {
-            (Some(c), _) => c.clone(),
-            (None, Some(name)) => self
-                .renderer
-                .scene_camera(name)
-                .map_err(render_err)?
-                .clone(),
-            (None, None) => {
-                let c = self.renderer.orbit_camera(
-                    world,
-                    "orbit",
-                    self.size.0,
-                    self.size.1,
-                    Orbit::default(),
-                );
-                self.camera = Some(c.clone());
-                c
-            }
-        };
-        cam.overlays = self.overlays;
-        let frames = self
-            .renderer
-            .render_cameras(world, std::slice::from_ref(&cam))
-            .map_err(render_err)?;
-        let Some(mut frame) = frames.into_iter().next() else {
-            return Ok(());
-        };
-        if self.overlays {
-            let (w, h) = (frame.width, frame.height);
-            let lines = [status()];
-            modesuite_render::hud::draw_text(&mut frame.rgb, w, h, 3, (4, 4), 1, &lines, [255; 3]);
-        }
-        let frame = &frame;
-        if let Some(dir) = &self.frames_dir {
-            let path = dir.join(format!("frame_{:05}.png", self.written));
-            write_frame_png(&path, frame).map_err(render_err)?;
-        }
-        if let Some(path) = &self.video_path {
-            if self.video.is_none() {
-                self.video = Some(
-                    VideoWriter::create(path, frame.width, frame.height, self.fps)
-                        .map_err(render_err)?,
-                );
-            }
-            if let Some(v) = self.video.as_mut() {
-                v.push(frame).map_err(render_err)?;
-            }
-        }
-        self.written += 1;
-        Ok(())
-    }
-
-    fn finish(self, out: &mut dyn Write, quiet: bool) -> Result<(), CliError> {
-        let frames = match self.video {
-            Some(v) => v.finish().map_err(render_err)?,
-            None => self.written as usize,
-        };
-        if !quiet {
-            let mut what = Vec::new();
-            if let Some(p) = &self.video_path {
-                what.push(format!("video {}", p.display()));
-            }
-            if let Some(d) = &self.frames_dir {
-                what.push(format!("PNG frames in {}", d.display()));
-            }
-            writeln!(
-                out,
-                "recorded {frames} frames at {:.1} fps ({}; {})",
-                self.fps,
-                what.join(", "),
-                self.renderer.device().adapter_name()
-            )
-            .map_err(io)?;
-        }
-        Ok(())
-    }
-}
-
 fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let size = parse_size("--size", &args.size)?;
     let (mut desc, source) = make::load_target(&args.target)?;
@@ -762,7 +617,14 @@ fn run_scene(made: make::Made, args: &RunArgs, out: &mut dyn Write) -> Result<()
     let mut progress = Progress::new(steps * args.episodes);
     for ep in 0..args.episodes {
         let seed = args.seed.wrapping_add(ep);
-        env.reset(Some(seed));
+        match (&args.load_state, ep) {
+            (Some(path), 0) => env
+                .load_state_file(path)
+                .map_err(|e| CliError::input(format!("--load-state {e}")))?,
+            _ => {
+                env.reset(Some(seed));
+            }
+        }
         policy.reset(seed);
         if let Some(r) = recorder.as_mut() {
             r.capture(&env.app.world, 0, || {
@@ -807,6 +669,10 @@ fn run_scene(made: make::Made, args: &RunArgs, out: &mut dyn Write) -> Result<()
         if ep + 1 == args.episodes {
             if let Some(path) = &args.dump_state {
                 dump_final(&mut env, &args.target, seed, length, path)?;
+            }
+            if let Some(path) = &args.save_state {
+                env.save_state_file(path)
+                    .map_err(|e| CliError::runtime(format!("--save-state {e}")))?;
             }
         }
         let wall = t.elapsed().as_secs_f64();

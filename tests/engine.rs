@@ -118,7 +118,8 @@ fn snapshot_restore_step_equals_uninterrupted_run() {
         env.step(&[action_at(0, s)]);
         first.push(env.state_hash());
     }
-    snap.restore(&mut env.app.world);
+    snap.restore(&mut env.app.world)
+        .expect("a snapshot of the same env restores");
     let mut second = Vec::new();
     for s in 40..160 {
         env.step(&[action_at(0, s)]);

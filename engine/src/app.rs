@@ -166,7 +166,9 @@ impl SimSettings {
 }
 
 /// Counters of the simulation (part of the env state).
-#[derive(Resource, Debug, Clone, Copy, PartialEq, Default)]
+#[derive(
+    Resource, Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize,
+)]
 pub struct SimClock {
     /// Env steps since the episode started.
     pub episode_steps: u64,
@@ -178,14 +180,20 @@ pub struct SimClock {
     pub time: f64,
 }
 
+crate::persist_by_serde!(SimClock);
+
 impl Stateful for SimClock {
     fn save_state(&self) -> Box<dyn std::any::Any + Send + Sync> {
         Box::new(*self)
     }
-    fn load_state(&mut self, state: &(dyn std::any::Any + Send + Sync)) {
-        if let Some(s) = state.downcast_ref::<Self>() {
-            *self = *s;
-        }
+    fn load_state(
+        &mut self,
+        state: &(dyn std::any::Any + Send + Sync),
+    ) -> Result<(), crate::checkpoint::StateError> {
+        *self = *state
+            .downcast_ref::<Self>()
+            .ok_or_else(crate::state::mismatch::<Self>)?;
+        Ok(())
     }
     fn hash_state(&self, h: &mut crate::state::StateHasher) {
         h.write_u64(self.episode_steps);
@@ -465,7 +473,10 @@ impl SimApp {
 
     /// Declares a component type as part of the env state (every entity's value is saved).
     pub fn register_stateful_component<
-        C: Component<Mutability = bevy_ecs::component::Mutable> + Clone + crate::state::HashState,
+        C: Component<Mutability = bevy_ecs::component::Mutable>
+            + Clone
+            + crate::state::HashState
+            + crate::checkpoint::Persist,
     >(
         &mut self,
     ) -> &mut Self {

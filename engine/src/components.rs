@@ -17,7 +17,7 @@ pub struct Object {
 }
 
 /// Pose of an object, `world_from_body` (for deformables: the pose they were spawned at).
-#[derive(Component, Debug, Clone, Copy, PartialEq)]
+#[derive(Component, Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pose(pub Isometry3<f64>);
 
 impl HashState for Pose {
@@ -31,7 +31,9 @@ impl HashState for Pose {
 }
 
 /// Linear (m/s) and angular (rad/s) velocity of a rigid object, world frame.
-#[derive(Component, Debug, Clone, Copy, PartialEq, Default)]
+#[derive(
+    Component, Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize,
+)]
 pub struct Velocity {
     /// Linear velocity of the centre of mass, m/s.
     pub linear: Vector3<f64>,
@@ -49,8 +51,10 @@ impl HashState for Velocity {
 
 /// World positions of a deformable's nodes or particles (m), written by its plugin in
 /// `Writeback`; what `--dump-state` reports and observation terms read.
-#[derive(Component, Debug, Clone, PartialEq, Default)]
+#[derive(Component, Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct DeformableNodes(pub Vec<Vector3<f64>>);
+
+crate::persist_by_serde!(Pose, Velocity, DeformableNodes);
 
 impl HashState for DeformableNodes {
     fn hash_state(&self, h: &mut StateHasher) {
@@ -73,6 +77,35 @@ pub struct JointState {
     pub positions: Vec<f64>,
     /// Velocities, rad/s or m/s.
     pub velocities: Vec<f64>,
+}
+
+/// The names are fixed at spawn; positions and velocities are the state.
+impl crate::checkpoint::Persist for JointState {
+    fn encode(&self, e: &mut crate::checkpoint::Encoder) {
+        e.put(&self.positions);
+        e.put(&self.velocities);
+    }
+    fn decode(
+        &mut self,
+        d: &mut crate::checkpoint::Decoder<'_>,
+    ) -> Result<(), crate::checkpoint::StateError> {
+        let positions: Vec<f64> = d.take()?;
+        let velocities: Vec<f64> = d.take()?;
+        if positions.len() != self.names.len() || velocities.len() != self.names.len() {
+            return Err(crate::checkpoint::StateError::part(
+                d.part(),
+                format!(
+                    "{} positions and {} velocities for {} joints",
+                    positions.len(),
+                    velocities.len(),
+                    self.names.len()
+                ),
+            ));
+        }
+        self.positions = positions;
+        self.velocities = velocities;
+        Ok(())
+    }
 }
 
 impl HashState for JointState {

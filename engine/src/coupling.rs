@@ -40,7 +40,7 @@ pub trait ContactQuery {
 }
 
 /// An impulse a deformable applied to rigid body `body` at `point` during a substep, N s.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Reaction {
     /// Body id as given in [`PointContact::body`].
     pub body: u32,

@@ -14,10 +14,11 @@ use bevy_ecs::prelude::*;
 use nalgebra::{Isometry3, Vector3};
 
 use crate::app::SimErrors;
+use crate::checkpoint::{Decoder, Encoder, Persist, StateError};
 use crate::components::{DeformableNodes, Object};
 use crate::coupling::{ContactQuery, GripperState, Grippers, NoColliders, Reaction};
 use crate::rigid::{DeformableSystems, RigidContext};
-use crate::state::{HashState, PluginStates, StateHasher, Stateful};
+use crate::state::{mismatch, HashState, PluginStates, StateHasher, Stateful};
 use crate::terms::{passive_forces_for, ForceContext, SceneTerms};
 use crate::{SimApp, SimClock, SimSettings};
 
@@ -209,6 +210,46 @@ impl<S: DeformableSolver> DeformableContext<S> {
     }
 }
 
+impl<S: DeformableSolver> DeformableContext<S> {
+    fn load_bodies(&mut self, states: &[Vec<f64>], part: &str) -> Result<(), StateError> {
+        if states.len() != self.bodies.len() {
+            return Err(StateError::part(
+                part,
+                format!(
+                    "{} bodies saved, {} in this env",
+                    states.len(),
+                    self.bodies.len()
+                ),
+            ));
+        }
+        for (b, s) in self.bodies.iter_mut().zip(states) {
+            b.solver
+                .load(s)
+                .map_err(|e| StateError::part(part, format!("body {}: {e}", b.entity)))?;
+        }
+        Ok(())
+    }
+}
+
+/// Every body's [`DeformableSolver::save`] vector, in spawn order.
+impl<S: DeformableSolver> Persist for DeformableContext<S> {
+    fn encode(&self, e: &mut Encoder) {
+        e.put(&(self.bodies.len() as u64));
+        for b in &self.bodies {
+            e.put(&b.solver.save());
+        }
+    }
+
+    fn decode(&mut self, d: &mut Decoder<'_>) -> Result<(), StateError> {
+        d.take_len("deformable bodies", self.bodies.len())?;
+        let states = (0..self.bodies.len())
+            .map(|_| d.take::<Vec<f64>>())
+            .collect::<Result<Vec<_>, _>>()?;
+        let part = d.part().to_string();
+        self.load_bodies(&states, &part)
+    }
+}
+
 impl<S: DeformableSolver> Stateful for DeformableContext<S> {
     fn save_state(&self) -> Box<dyn Any + Send + Sync> {
         Box::new(
@@ -219,13 +260,11 @@ impl<S: DeformableSolver> Stateful for DeformableContext<S> {
         )
     }
 
-    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) {
-        if let Some(states) = state.downcast_ref::<Vec<Vec<f64>>>() {
-            for (b, s) in self.bodies.iter_mut().zip(states) {
-                // A state saved from this same context always fits.
-                let _ = b.solver.load(s);
-            }
-        }
+    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) -> Result<(), StateError> {
+        let states = state
+            .downcast_ref::<Vec<Vec<f64>>>()
+            .ok_or_else(mismatch::<Self>)?;
+        self.load_bodies(states, std::any::type_name::<Self>())
     }
 
     fn hash_state(&self, h: &mut StateHasher) {
@@ -348,7 +387,7 @@ fn deformable_step<S: DeformableSolver>(
 /// Which nodes of a deformable are grasped and which touch rigid colliders (written with its
 /// [`DeformableNodes`] after every physics step): what viewers draw as grasp and contact markers
 /// and what tasks may read. Derived from the solver's state.
-#[derive(Component, Debug, Clone, PartialEq, Default)]
+#[derive(Component, Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct DeformableMarkers {
     /// Nodes held by grasps, ascending.
     pub grasped: Vec<u32>,
@@ -368,6 +407,8 @@ impl DeformableMarkers {
         }
     }
 }
+
+crate::persist_by_serde!(DeformableMarkers);
 
 impl HashState for DeformableMarkers {
     fn hash_state(&self, h: &mut StateHasher) {

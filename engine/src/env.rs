@@ -204,14 +204,16 @@ pub struct Env {
     /// The app (world and schedules).
     pub app: SimApp,
     initial: Snapshot,
-    episode_return: f64,
+    /// Hash of the spawn state (what state files must match).
+    fingerprint: u64,
+    pub(crate) episode_return: f64,
     /// Errors that ended episodes since creation.
     pub error_count: u64,
     /// Reset finished episodes inside `step` (same-step autoreset; default true). With false,
     /// the world keeps the final state until the caller calls `reset`.
     pub autoreset: bool,
     /// What failed in the last reset pass; the next step ends the episode with it.
-    reset_error: Option<String>,
+    pub(crate) reset_error: Option<String>,
 }
 
 impl Env {
@@ -219,14 +221,22 @@ impl Env {
     pub fn new(mut app: SimApp) -> Self {
         app.world.init_resource::<Spaces>();
         let initial = Snapshot::take(&app.world);
+        let fingerprint = state_hash(&app.world);
         Self {
             app,
             initial,
+            fingerprint,
             episode_return: 0.0,
             error_count: 0,
             autoreset: true,
             reset_error: None,
         }
+    }
+
+    /// Bit-exact hash of the state the env was made with (its scene as spawned): state files
+    /// of another scene are refused by it.
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
     }
 
     /// Observation and action spaces.
@@ -237,12 +247,20 @@ impl Env {
     /// Starts a new episode; with a seed, the env's RNG is reseeded first.
     pub fn reset(&mut self, seed: Option<u64>) -> (Vec<f32>, EnvInfo) {
         let rng = *self.app.world.resource::<EnvRng>();
-        self.initial.restore(&mut self.app.world);
+        // The env's own snapshot of its own world: restoring it cannot mismatch, but if it
+        // ever did, the reset reports it like any failed reset event.
+        let restored = self.initial.restore(&mut self.app.world);
         *self.app.world.resource_mut::<EnvRng>() = match seed {
             Some(s) => EnvRng::from_seed(s),
             None => rng,
         };
         self.app.world.resource_mut::<SimErrors>().current.clear();
+        if let Err(e) = restored {
+            self.app
+                .world
+                .resource_mut::<SimErrors>()
+                .raise(format!("restoring the initial state: {e}"));
+        }
         *self.app.world.resource_mut::<StepSignals>() = StepSignals::default();
         self.app.run_reset_pass();
         self.episode_return = 0.0;

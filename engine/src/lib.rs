@@ -5,7 +5,8 @@
 //! [`Substep`]), one ECS `World` per environment and a parallel [`VecEnv`], scenes in RON
 //! ([`scene`]: parse -> validate -> compile -> spawn), shape generators and tetrahedral meshing
 //! ([`shapes`]), rigid physics with rapier and the deformable coupling API ([`rigid`],
-//! [`coupling`]), snapshots and determinism hashes ([`state`]), and per-env RNGs ([`rng`]).
+//! [`coupling`]), snapshots and determinism hashes ([`state`]), state files ([`checkpoint`]),
+//! and per-env RNGs ([`rng`]).
 //!
 //! ```no_run
 //! use modesuite_engine::prelude::*;
@@ -29,6 +30,7 @@
 
 pub mod app;
 pub mod bench;
+pub mod checkpoint;
 pub mod components;
 pub mod coupling;
 pub mod deformable;

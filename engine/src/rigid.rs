@@ -18,13 +18,14 @@ use parry3d::partitioning::{Bvh, BvhBuildStrategy};
 use rapier3d::prelude::*;
 
 use crate::app::{PhysicsSystems, Plugin, SimErrors, SubstepSystems};
+use crate::checkpoint::{Decoder, Encoder, Persist, StateError};
 use crate::components::{Object, Pose, Velocity};
 use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::math::{
     interpolate_pose, pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier,
 };
 use crate::scene::{MaterialDesc, RigidKind, RigidModel, RigidShape};
-use crate::state::{StateHasher, Stateful};
+use crate::state::{mismatch, StateHasher, Stateful};
 use crate::SimApp;
 
 /// Sets of the rigid plugin.
@@ -144,7 +145,9 @@ pub struct RigidContext {
     queries_stale: bool,
 }
 
-#[derive(Clone)]
+/// The rigid world's state: rapier's sets as rapier serialises them (contact manifolds and
+/// warm-start impulses included) and the coupling's pending reactions.
+#[derive(Clone, serde::Serialize, serde::Deserialize)]
 struct RigidState {
     bodies: RigidBodySet,
     colliders: ColliderSet,
@@ -687,9 +690,9 @@ fn rigid_writeback(ctx: Res<RigidContext>, mut q: Query<(&RigidRef, &mut Pose, &
     }
 }
 
-impl Stateful for RigidContext {
-    fn save_state(&self) -> Box<dyn Any + Send + Sync> {
-        Box::new(RigidState {
+impl RigidContext {
+    fn rigid_state(&self) -> RigidState {
+        RigidState {
             bodies: self.bodies.clone(),
             colliders: self.colliders.clone(),
             impulse_joints: self.impulse_joints.clone(),
@@ -701,28 +704,63 @@ impl Stateful for RigidContext {
             soft_bodies: self.soft_bodies.clone(),
             pending: self.pending.clone(),
             step_start: self.step_start.clone(),
-        })
+        }
     }
 
-    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) {
-        if let Some(s) = state.downcast_ref::<RigidState>() {
-            let s = s.clone();
-            self.bodies = s.bodies;
-            self.colliders = s.colliders;
-            self.impulse_joints = s.impulse_joints;
-            self.multibody_joints = s.multibody_joints;
-            self.islands = s.islands;
-            self.broad_phase = s.broad_phase;
-            self.narrow_phase = s.narrow_phase;
-            self.ccd = s.ccd;
-            self.soft_bodies = s.soft_bodies;
-            self.pending = s.pending;
-            self.step_start = s.step_start;
-            // The pipeline holds only workspace, but a fresh one also drops memos tied to the
-            // replaced sets.
-            self.pipeline = PhysicsPipeline::new();
-            self.queries_stale = true;
+    fn set_rigid_state(&mut self, s: RigidState) {
+        self.bodies = s.bodies;
+        self.colliders = s.colliders;
+        self.impulse_joints = s.impulse_joints;
+        self.multibody_joints = s.multibody_joints;
+        self.islands = s.islands;
+        self.broad_phase = s.broad_phase;
+        self.narrow_phase = s.narrow_phase;
+        self.ccd = s.ccd;
+        self.soft_bodies = s.soft_bodies;
+        self.pending = s.pending;
+        self.step_start = s.step_start;
+        // The pipeline holds only workspace, but a fresh one also drops memos tied to the
+        // replaced sets.
+        self.pipeline = PhysicsPipeline::new();
+        self.queries_stale = true;
+    }
+}
+
+impl Persist for RigidContext {
+    fn encode(&self, e: &mut Encoder) {
+        e.put(&self.rigid_state());
+    }
+
+    fn decode(&mut self, d: &mut Decoder<'_>) -> Result<(), StateError> {
+        let s: RigidState = d.take()?;
+        if s.bodies.len() != self.bodies.len() || s.colliders.len() != self.colliders.len() {
+            return Err(StateError::part(
+                d.part(),
+                format!(
+                    "{} bodies and {} colliders in the file, {} and {} in this env",
+                    s.bodies.len(),
+                    s.colliders.len(),
+                    self.bodies.len(),
+                    self.colliders.len()
+                ),
+            ));
         }
+        self.set_rigid_state(s);
+        Ok(())
+    }
+}
+
+impl Stateful for RigidContext {
+    fn save_state(&self) -> Box<dyn Any + Send + Sync> {
+        Box::new(self.rigid_state())
+    }
+
+    fn load_state(&mut self, state: &(dyn Any + Send + Sync)) -> Result<(), StateError> {
+        let s = state
+            .downcast_ref::<RigidState>()
+            .ok_or_else(mismatch::<Self>)?;
+        self.set_rigid_state(s.clone());
+        Ok(())
     }
 
     fn hash_state(&self, h: &mut StateHasher) {

@@ -9,7 +9,7 @@ use bevy_ecs::prelude::*;
 use crate::state::{StateHasher, Stateful};
 
 /// The random number generator of one environment.
-#[derive(Resource, Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Resource, Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct EnvRng {
     s: [u64; 4],
 }
@@ -82,14 +82,20 @@ impl EnvRng {
     }
 }
 
+crate::persist_by_serde!(EnvRng);
+
 impl Stateful for EnvRng {
     fn save_state(&self) -> Box<dyn std::any::Any + Send + Sync> {
         Box::new(*self)
     }
-    fn load_state(&mut self, state: &(dyn std::any::Any + Send + Sync)) {
-        if let Some(s) = state.downcast_ref::<Self>() {
-            *self = *s;
-        }
+    fn load_state(
+        &mut self,
+        state: &(dyn std::any::Any + Send + Sync),
+    ) -> Result<(), crate::checkpoint::StateError> {
+        *self = *state
+            .downcast_ref::<Self>()
+            .ok_or_else(crate::state::mismatch::<Self>)?;
+        Ok(())
     }
     fn hash_state(&self, h: &mut StateHasher) {
         for w in self.s {

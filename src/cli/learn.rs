@@ -164,6 +164,8 @@ pub fn eval(args: &EvalArgs, out: &mut dyn Write) -> Result<(), CliError> {
         seed: args.seed,
         episodes: args.episodes,
         dump_state: None,
+        save_state: None,
+        load_state: None,
         json: args.json,
         plugin: Vec::new(),
         video: args.video.clone(),

@@ -21,7 +21,7 @@ use crate::robot::Robot;
 use crate::urdf::JointKind;
 
 /// What one joint is asked to do.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum JointCommand {
     /// Track a position (rad or m) with the joint's PD gains.
     Position(f64),
@@ -33,7 +33,7 @@ pub enum JointCommand {
 
 /// PD gains of one joint's motor (rapier's implicit force-based motor, limited to the joint's
 /// effort minus the gravity feed-forward).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum JointGains {
     /// Gains scaled by the joint-space inertia `M_kk` of the joint at the current configuration
     /// (the inertia it moves with every other joint held): `kp = omega^2 M_kk`,
@@ -127,7 +127,7 @@ pub const VELOCITY_MOTOR_FACTOR: f64 = 50.0;
 
 /// Joint controller of one robot: a command and gains per joint, gravity compensation on or off.
 /// Call [`JointController::apply`] before every rapier step (in `PhysicsSystems::ApplyActions`).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct JointController {
     /// Command per joint, [`Robot::joints`] order. Mimic joints ignore theirs and follow their
     /// leader's position command.
@@ -355,7 +355,7 @@ fn bad_joint(robot: &Robot, joint: usize) -> RobotError {
 
 /// Holonomic base velocity command in the base frame: forward `vx` (m/s), left `vy` (m/s), yaw
 /// rate `wz` (rad/s).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct BaseVelocity {
     /// Forward velocity, m/s.
     pub vx: f64,

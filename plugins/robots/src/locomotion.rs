@@ -77,7 +77,7 @@ pub const NUM_LEGS: usize = 4;
 
 /// Kinematics of one leg with a hip roll joint (axis x), a hip pitch joint (axis y) and a knee
 /// (axis y), in the base frame. Read from the URDF by [`LegKinematics::from_model`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LegKinematics {
     /// Hip roll joint origin in the base frame, m.
     pub hip: Vector3<f64>,
@@ -253,7 +253,7 @@ impl LegKinematics {
 
 /// Parameters of [`TrotController`]; a robot's `gait` in a scene (any subset of the fields, the
 /// rest at their defaults, e.g. `gait: (period: 0.35, kp: 900.0)`).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrotParams {
     /// Gait period (one full cycle, both pairs stepping), s.
@@ -377,7 +377,7 @@ impl TrotParams {
 
 /// Joint targets of the 12 leg joints, legs in the order of [`RobotSpec::leg_joints`]
 /// (fl, fr, hl, hr; hx, hy, kn each).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LegTargets {
     /// Positions, rad.
     pub q: [f64; 12],
@@ -386,7 +386,7 @@ pub struct LegTargets {
 }
 
 /// Per-leg state of the trot.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FootState {
     /// Foot centre target in the level frame H (relative to the base origin), m.
     pub target: Vector3<f64>,
@@ -397,7 +397,7 @@ pub struct FootState {
 }
 
 /// The trot controller of one quadruped. See the [module documentation](self).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrotController {
     params: TrotParams,
     legs: [LegKinematics; NUM_LEGS],

@@ -27,6 +27,7 @@ use bevy_ecs::prelude::*;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use serde::Deserialize;
 
+use modesuite_engine::checkpoint::{Decoder, Encoder, Persist, StateError};
 use modesuite_engine::components::{JointState, Object, Pose, Velocity};
 use modesuite_engine::coupling::{GripperState, Grippers};
 use modesuite_engine::env::ActionBuffer;
@@ -35,7 +36,7 @@ use modesuite_engine::registry::{
 };
 use modesuite_engine::rigid::RigidRef;
 use modesuite_engine::scene::PoseDesc;
-use modesuite_engine::state::{StateHasher, Stateful};
+use modesuite_engine::state::{mismatch, StateHasher, Stateful};
 use modesuite_engine::{
     EnvSystems, PhysicsSystems, Plugin, RigidContext, RigidSystems, SceneError, SimApp, SimClock,
     SimErrors, SimSettings, Space, Spaces, Substep, SubstepSystems,
@@ -634,15 +635,68 @@ impl Robots {
 #[derive(Clone)]
 struct RobotsState(Vec<RobotRuntime>);
 
+/// The part of a [`RobotRuntime`] that changes during an episode (its `fixed` facts come from
+/// the scene).
+type RuntimeState = (
+    JointController,
+    BaseVelocity,
+    Isometry3<f64>,
+    bool,
+    Option<TrotController>,
+);
+
+impl Persist for Robots {
+    fn encode(&self, e: &mut Encoder) {
+        e.put(&(self.robots.len() as u64));
+        for r in &self.robots {
+            e.put(&(
+                &r.controller,
+                &r.base_command,
+                &r.ee_target,
+                r.gripper_closed,
+                &r.gait,
+            ));
+        }
+    }
+
+    fn decode(&mut self, d: &mut Decoder<'_>) -> Result<(), StateError> {
+        d.take_len("robots", self.robots.len())?;
+        let states = (0..self.robots.len())
+            .map(|_| d.take::<RuntimeState>())
+            .collect::<Result<Vec<_>, _>>()?;
+        for (r, (controller, base, ee, closed, gait)) in self.robots.iter_mut().zip(states) {
+            if controller.commands.len() != r.controller.commands.len()
+                || gait.is_some() != r.gait.is_some()
+            {
+                return Err(StateError::part(
+                    d.part(),
+                    format!(
+                        "robot {}: the file's controller does not fit its joints or gait",
+                        r.fixed.name
+                    ),
+                ));
+            }
+            r.controller = controller;
+            r.base_command = base;
+            r.ee_target = ee;
+            r.gripper_closed = closed;
+            r.gait = gait;
+        }
+        Ok(())
+    }
+}
+
 impl Stateful for Robots {
     fn save_state(&self) -> Box<dyn std::any::Any + Send + Sync> {
         Box::new(RobotsState(self.robots.clone()))
     }
 
-    fn load_state(&mut self, state: &(dyn std::any::Any + Send + Sync)) {
-        if let Some(s) = state.downcast_ref::<RobotsState>() {
-            self.robots.clone_from(&s.0);
-        }
+    fn load_state(&mut self, state: &(dyn std::any::Any + Send + Sync)) -> Result<(), StateError> {
+        let s = state
+            .downcast_ref::<RobotsState>()
+            .ok_or_else(mismatch::<Self>)?;
+        self.robots.clone_from(&s.0);
+        Ok(())
     }
 
     fn hash_state(&self, h: &mut StateHasher) {

@@ -175,7 +175,7 @@ pub struct Task {
 }
 
 /// Per-env task state (part of the snapshot).
-#[derive(Resource, Debug, Clone, Default, PartialEq)]
+#[derive(Resource, Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TaskState {
     /// Current target positions.
     pub targets: Vec<Vector3<f64>>,
@@ -191,14 +191,22 @@ pub struct TaskState {
     pub next_event: Vec<f64>,
 }
 
+modesuite_engine::persist_by_serde!(TaskState);
+
 impl Stateful for TaskState {
     fn save_state(&self) -> Box<dyn std::any::Any + Send + Sync> {
         Box::new(self.clone())
     }
-    fn load_state(&mut self, state: &(dyn std::any::Any + Send + Sync)) {
-        if let Some(s) = state.downcast_ref::<TaskState>() {
-            self.clone_from(s);
-        }
+    fn load_state(
+        &mut self,
+        state: &(dyn std::any::Any + Send + Sync),
+    ) -> Result<(), modesuite_engine::checkpoint::StateError> {
+        self.clone_from(
+            state
+                .downcast_ref::<TaskState>()
+                .ok_or_else(modesuite_engine::state::mismatch::<Self>)?,
+        );
+        Ok(())
     }
     fn hash_state(&self, h: &mut StateHasher) {
         for t in &self.targets {
