@@ -201,6 +201,18 @@ class ModeSuiteEnv(gym.Env):
         """The state as ``modesuite.state.v1`` JSON (as ``modesuite run --dump-state``)."""
         return self._core.dump_state(0)
 
+    def save_state(self) -> bytes:
+        """The complete simulation state as a state file's bytes (``modesuite run
+        --save-state``): write them anywhere, continue with :meth:`load_state`."""
+        return self._core.save_state(0)
+
+    def load_state(self, data: bytes) -> Any:
+        """Continues the episode saved in ``data`` (bytes of :meth:`save_state` or a ``--save-state``
+        file of the same target, plugins and build; anything else raises ``ValueError`` and
+        changes nothing). Returns the observation; the next ``step`` continues bit-exactly as
+        it would have in the env that saved it."""
+        return self._core.load_state(0, bytes(data))
+
 
 class ModeSuiteVectorEnv(VectorEnv):
     """``num_envs`` modesuite environments stepped together in Rust (GIL released).
@@ -347,3 +359,12 @@ class ModeSuiteVectorEnv(VectorEnv):
     def state_hashes(self) -> list[int]:
         """A bit-exact hash of each env's simulation state."""
         return self._core.state_hashes()
+
+    def save_state(self, index: int) -> bytes:
+        """The complete state of env ``index`` as a state file's bytes."""
+        return self._core.save_state(index)
+
+    def load_state(self, index: int, data: bytes) -> Any:
+        """Continues env ``index`` from a state file's bytes (see ``ModeSuiteEnv.load_state``);
+        returns that env's observation."""
+        return self._core.load_state(index, bytes(data))

@@ -22,7 +22,7 @@ use numpy::{
 };
 use pyo3::exceptions::{PyNotImplementedError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBytes, PyDict};
 
 use modesuite::engine::{SceneModel, VecEnv};
 use modesuite::gym::info::{reset_info, Batch, EpisodeTracker, InfoValue};
@@ -500,6 +500,50 @@ impl Core {
     /// A bit-exact hash of each env's state.
     fn state_hashes(&self) -> PyResult<Vec<u64>> {
         Ok(self.lock()?.vec.state_hashes())
+    }
+
+    /// The complete state of env `index` as the bytes of a state file (`run --save-state`).
+    #[pyo3(signature = (index=0))]
+    fn save_state<'py>(&self, py: Python<'py>, index: usize) -> PyResult<Bound<'py, PyBytes>> {
+        let g = self.lock()?;
+        let env = g
+            .vec
+            .envs()
+            .get(index)
+            .ok_or_else(|| PyValueError::new_err(format!("index = {index}: 0..{}", self.n)))?;
+        let bytes = env
+            .save_state()
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        Ok(PyBytes::new(py, &bytes))
+    }
+
+    /// Replaces the state of env `index` with a state file's bytes (of the same target, plugins
+    /// and build; anything else is a `ValueError` and changes nothing). Its episode continues
+    /// from there; returns its observation. The scripted expert starts afresh.
+    fn load_state<'py>(&self, py: Python<'py>, index: usize, data: &[u8]) -> PyResult<Py<PyAny>> {
+        let mut g = self.lock()?;
+        let inner = &mut *g;
+        if index >= self.n {
+            return Err(PyValueError::new_err(format!(
+                "index = {index}: 0..{}",
+                self.n
+            )));
+        }
+        let r = py.detach(|| {
+            guarded(|| {
+                let env = &mut inner.vec.envs_mut()[index];
+                env.load_state(data).map(|()| env.observation())
+            })
+        });
+        let obs =
+            poison(inner, r)?.map_err(|e| PyValueError::new_err(format!("load_state: {e}")))?;
+        let dim = obs.len();
+        inner.last_obs[index * dim..(index + 1) * dim].copy_from_slice(&obs);
+        inner.trackers[index].reset();
+        inner.waiting[index] = false;
+        inner.started = true;
+        inner.expert_reset[index] = Some(0);
+        convert::obs(py, &inner.obs, &obs, None)
     }
 
     /// The state of env `index` as `modesuite.state.v1` JSON (as `run --dump-state` writes).
