@@ -69,6 +69,15 @@ pub trait BodyKind: Send + Sync + 'static {
         entity: Entity,
         body: &CompiledBody,
     ) -> Result<(), SceneError>;
+    /// For a deformable kind: the triangles of the body's surface, as indices into its nodes
+    /// (the [`DeformableNodes`](crate::components::DeformableNodes) order), outward-facing and
+    /// as fine as the nodes allow. Renderers draw it and tasks measure it (covered areas), so a
+    /// new solver is drawn and measured without either knowing its types. `None` (the default)
+    /// for kinds without nodes.
+    fn surface_triangles(&self, body: &CompiledBody) -> Option<Vec<[u32; 3]>> {
+        let _ = body;
+        None
+    }
 }
 
 /// Compiled, immutable data of one plugin-owned scene section (shared between envs).

@@ -171,6 +171,28 @@ impl BodyKind for SolidKind {
         "fem.solid"
     }
 
+    /// The boundary faces, each split at its edge nodes into four (10-node tetrahedra) where
+    /// it has them.
+    fn surface_triangles(&self, body: &CompiledBody) -> Option<Vec<[u32; 3]>> {
+        let solid = body.downcast_ref::<CompiledSolid>()?;
+        let mesh = &solid.model.mesh;
+        let mut tris = Vec::with_capacity(mesh.boundary_faces.len() * 4);
+        for f in &mesh.boundary_faces {
+            let [a, b, c] = *f;
+            match (
+                mesh.edge_node(a, b),
+                mesh.edge_node(b, c),
+                mesh.edge_node(c, a),
+            ) {
+                (Some(ab), Some(bc), Some(ca)) => {
+                    tris.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
+                }
+                _ => tris.push(*f),
+            }
+        }
+        Some(tris)
+    }
+
     fn description(&self) -> &str {
         "elastic solid: 10-node tetrahedra, Stable Neo-Hookean, implicit (rods, belts, tori)"
     }

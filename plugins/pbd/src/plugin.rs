@@ -238,6 +238,11 @@ impl BodyKind for ClothKind {
         "pbd.cloth"
     }
 
+    /// The cloth's own triangles.
+    fn surface_triangles(&self, body: &CompiledBody) -> Option<Vec<[u32; 3]>> {
+        Some(body.downcast_ref::<CompiledCloth>()?.triangles.clone())
+    }
+
     fn description(&self) -> &str {
         "XPBD cloth from any triangle surface (Grid sheets, meshes), with pins and named groups"
     }

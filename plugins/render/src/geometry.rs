@@ -328,34 +328,14 @@ struct DeformableVisual {
     style: Style,
 }
 
-/// The surface triangles of a deformable body, by its compiled body type (`fem.solid`: boundary
-/// faces split at the edge nodes; `pbd.cloth`: the cloth's triangles); `None` for other kinds.
+/// The surface triangles of a deformable body, as its body kind gives them
+/// ([`BodyKind::surface_triangles`](modesuite_engine::registry::BodyKind::surface_triangles));
+/// `None` for rigid bodies and kinds without nodes.
 pub fn deformable_triangles(body: &BodyModel) -> Option<Vec<[u32; 3]>> {
-    let BodyModel::Plugin { compiled, .. } = body else {
-        return None;
-    };
-    if let Some(solid) = compiled.downcast_ref::<modesuite_fem::plugin::CompiledSolid>() {
-        let mesh = &solid.model.mesh;
-        let mut tris = Vec::with_capacity(mesh.boundary_faces.len() * 4);
-        for f in &mesh.boundary_faces {
-            let [a, b, c] = *f;
-            match (
-                mesh.edge_node(a, b),
-                mesh.edge_node(b, c),
-                mesh.edge_node(c, a),
-            ) {
-                (Some(ab), Some(bc), Some(ca)) => {
-                    tris.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
-                }
-                _ => tris.push(*f),
-            }
-        }
-        return Some(tris);
+    match body {
+        BodyModel::Plugin { kind, compiled } => kind.surface_triangles(compiled),
+        _ => None,
     }
-    if let Some(cloth) = compiled.downcast_ref::<modesuite_pbd::plugin::CompiledCloth>() {
-        return Some(cloth.triangles.clone());
-    }
-    None
 }
 
 /// Which markers [`SceneExtractor::extract`] adds after the opaque geometry.
