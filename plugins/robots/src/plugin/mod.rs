@@ -1,0 +1,94 @@
+//! The robots plugin: robots in scene files, their per-env controllers and action modes.
+//!
+//! A scene names its robots in the `robots` section:
+//! ```ron
+//! extensions: {
+//!     "robots": [
+//!         (name: "robot", model: "franka", pose: (pos: (0, 0, 0), rpy: (0, 0, 0)),
+//!          actions: (arm: EePoseDelta)),
+//!     ],
+//! }
+//! ```
+//! `model` is a registered robot (`franka`, `spot`, or one a plugin registers). Each env spawns
+//! the robot as a rapier multibody, one entity per rapier body (`"robot/panda_link3"`, kind
+//! `robot.link`, so `--dump-state` lists link poses and deformables can touch the links), and a
+//! root entity (`"robot"`, kind `robot`) with the [`JointState`]. Per env, the [`Robots`]
+//! resource holds every robot's controller state (targets, commands, gripper); it is part of the
+//! env state, so resets and snapshots restore it.
+//!
+//! Systems: in `EnvSystems::ProcessActions` each robot reads its slice of the action (see
+//! [`crate::actions`]) or follows its `script`; in `SubstepSystems::Predict` the walking
+//! controllers plan and the joint controllers write motor targets and gravity compensation before every rapier substep; in
+//! `PhysicsSystems::Writeback` the joint states are copied to the root entities.
+//!
+//! Files: the plugin here; `section` (the `robots` section: descriptions, scripts, compile),
+//! `spawn` (a robot's entities and runtime), `runtime` (the per-env [`Robots`] state and
+//! [`RobotObservation`]) and `systems` (actions, scripts and control each step).
+
+mod runtime;
+mod section;
+mod spawn;
+mod systems;
+
+use std::sync::Arc;
+
+use bevy_ecs::prelude::*;
+
+use modesuite_engine::components::JointState;
+use modesuite_engine::coupling::Grippers;
+use modesuite_engine::registry::RobotEntry;
+use modesuite_engine::{
+    EnvSystems, PhysicsSystems, Plugin, RigidSystems, SimApp, Substep, SubstepSystems,
+};
+
+use crate::models::{RobotKind, RobotSpec};
+
+pub use runtime::{RobotFixed, RobotObservation, RobotRuntime, Robots};
+pub use section::{
+    CompiledRobot, RobotDesc, RobotsSection, Script, ScriptBase, ScriptEe, ScriptGripper,
+};
+pub use systems::BASE_LIMITS;
+use systems::{robot_actions, robot_control, robot_writeback};
+
+/// Registers the robots (`franka`, `spot`), the `robots` scene section and the controller
+/// systems.
+pub struct RobotsPlugin;
+
+impl Plugin for RobotsPlugin {
+    fn name(&self) -> &str {
+        "modesuite.robots"
+    }
+
+    fn build(&self, app: &mut SimApp) {
+        for kind in [RobotKind::Franka, RobotKind::Spot] {
+            let spec = RobotSpec::of(kind);
+            app.register_robot(RobotEntry {
+                name: spec.id.to_string(),
+                description: match kind {
+                    RobotKind::Franka => {
+                        "Franka Panda with hand on a Clearpath Ridgeback (holonomic)"
+                    }
+                    RobotKind::Spot => "Spot with Spot Arm (legged, floating base)",
+                }
+                .to_string(),
+                payload: Arc::new(spec),
+            });
+        }
+        app.register_section(RobotsSection);
+        app.register_stateful::<Robots>();
+        app.register_stateful_component::<JointState>();
+        app.world.init_resource::<Robots>();
+        app.world.init_resource::<Grippers>();
+        app.add_systems(
+            modesuite_engine::EnvStep,
+            robot_actions.in_set(EnvSystems::ProcessActions),
+        );
+        app.add_systems(Substep, robot_control.in_set(SubstepSystems::Predict));
+        app.add_systems(
+            modesuite_engine::PhysicsStep,
+            robot_writeback
+                .in_set(PhysicsSystems::Writeback)
+                .after(RigidSystems::Writeback),
+        );
+    }
+}
