@@ -11,7 +11,7 @@ use std::any::Any;
 
 use bevy_ecs::component::Mutable;
 use bevy_ecs::prelude::*;
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 use crate::app::SimErrors;
 use crate::checkpoint::{Decoder, Encoder, Persist, StateError};
@@ -108,6 +108,80 @@ pub trait DeformableSolver: Send + Sync + 'static {
     fn contact_nodes(&self, out: &mut Vec<u32>) {
         let _ = out;
     }
+    /// Moves the body rigidly: its nodes are now at `positions` (the old ones moved by a rigid
+    /// transform whose rotation is `rotation`); velocities turn with it where the solver keeps
+    /// them. Tasks' randomisation events use it. Default: not supported (an error).
+    fn move_rigidly(
+        &mut self,
+        positions: &[Vector3<f64>],
+        rotation: &UnitQuaternion<f64>,
+    ) -> Result<(), String> {
+        let _ = (positions, rotation);
+        Err("this solver cannot move its bodies".to_string())
+    }
+    /// Adds `dv` (m/s) to the velocity of every node (tasks' `Push` event). Default: not
+    /// supported (an error).
+    fn add_velocity(&mut self, dv: &Vector3<f64>) -> Result<(), String> {
+        let _ = dv;
+        Err("this solver cannot push its bodies".to_string())
+    }
+    /// Sets the material's Young's modulus, Pa (tasks' `Material` event). Default: the body has
+    /// none (an error).
+    fn set_youngs_modulus(&mut self, youngs_modulus: f64) -> Result<(), String> {
+        let _ = youngs_modulus;
+        Err("this body has no Young's modulus to set".to_string())
+    }
+    /// Holds `nodes` with rigid body `body`, currently at `pose`: a grasp limited to
+    /// `grasp_force_limit` N (released when that gripper opens) or, with `None`, a fixed
+    /// attachment (a task's `held` object). Default: not supported (an error).
+    fn hold_nodes(
+        &mut self,
+        body: u32,
+        pose: &Isometry3<f64>,
+        nodes: &[u32],
+        grasp_force_limit: Option<f64>,
+    ) -> Result<(), String> {
+        let _ = (body, pose, nodes, grasp_force_limit);
+        Err("this solver cannot hold nodes with a rigid body".to_string())
+    }
+}
+
+type HasFn = fn(&World, Entity) -> bool;
+type GetFn = for<'a> fn(&'a mut World, Entity) -> Option<&'a mut dyn DeformableSolver>;
+
+/// How to reach the body of an entity in every solver's context, whatever its type (filled by
+/// [`add_deformable_systems`]); see [`deformable_mut`].
+#[derive(Resource, Default, Clone)]
+pub struct DeformableAccess {
+    solvers: Vec<(HasFn, GetFn)>,
+}
+
+fn has_body<S: DeformableSolver>(world: &World, entity: Entity) -> bool {
+    world
+        .get_resource::<DeformableContext<S>>()
+        .is_some_and(|c| c.bodies.iter().any(|b| b.entity == entity))
+}
+
+fn get_body<S: DeformableSolver>(
+    world: &mut World,
+    entity: Entity,
+) -> Option<&mut dyn DeformableSolver>
+where
+    DeformableContext<S>: Component<Mutability = Mutable>,
+{
+    let ctx = world
+        .get_resource_mut::<DeformableContext<S>>()?
+        .into_inner();
+    ctx.get_mut(entity).map(|s| s as &mut dyn DeformableSolver)
+}
+
+/// The solver body of a deformable entity, through the solver-neutral [`DeformableSolver`]
+/// interface (tasks and other plugins move, push, hold and re-parameterise bodies this way
+/// without depending on the solver's crate); `None` when the entity is no deformable body.
+pub fn deformable_mut(world: &mut World, entity: Entity) -> Option<&mut dyn DeformableSolver> {
+    let solvers = world.get_resource::<DeformableAccess>()?.solvers.clone();
+    let (_, get) = solvers.into_iter().find(|(has, _)| has(world, entity))?;
+    get(world, entity)
 }
 
 /// A gripper's finger volume in the world frame: an oriented box.
@@ -443,6 +517,10 @@ where
     DeformableContext<S>: Component<Mutability = Mutable>,
 {
     app.insert_resource(DeformableContext::<S>::default());
+    app.world
+        .get_resource_or_insert_with(DeformableAccess::default)
+        .solvers
+        .push((has_body::<S>, get_body::<S>));
     app.register_stateful::<DeformableContext<S>>();
     app.register_stateful_component::<DeformableNodes>();
     app.register_stateful_component::<DeformableMarkers>();

@@ -45,6 +45,7 @@ pub mod scene;
 pub mod shapes;
 pub mod simd;
 pub mod state;
+pub mod surface;
 pub mod terms;
 
 pub use app::{

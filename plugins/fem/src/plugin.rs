@@ -28,7 +28,7 @@ use modesuite_engine::deformable::{
 use modesuite_engine::registry::{BodyCompileContext, BodyKind, CompiledBody};
 use modesuite_engine::scene::{NodeSelect, SceneError};
 use modesuite_engine::{DeformableSystems, Plugin, SimApp};
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use serde::Deserialize;
 
 use crate::{FemConfig, FemSolid, GraspParams, Material, SolidModel};
@@ -69,6 +69,44 @@ pub struct CompiledSolid {
 pub type FemContext = DeformableContext<FemSolid>;
 
 impl DeformableSolver for FemSolid {
+    fn move_rigidly(
+        &mut self,
+        positions: &[Vector3<f64>],
+        rotation: &UnitQuaternion<f64>,
+    ) -> Result<(), String> {
+        let vel: Vec<Vector3<f64>> = self.velocities().iter().map(|v| rotation * v).collect();
+        self.set_positions_velocities(positions, &vel)
+            .map_err(|e| e.to_string())
+    }
+
+    fn add_velocity(&mut self, dv: &Vector3<f64>) -> Result<(), String> {
+        let vel: Vec<Vector3<f64>> = self.velocities().iter().map(|v| v + dv).collect();
+        let pos = self.positions().to_vec();
+        self.set_positions_velocities(&pos, &vel)
+            .map_err(|e| e.to_string())
+    }
+
+    fn set_youngs_modulus(&mut self, youngs_modulus: f64) -> Result<(), String> {
+        FemSolid::set_youngs_modulus(self, youngs_modulus).map_err(|e| e.to_string())
+    }
+
+    fn hold_nodes(
+        &mut self,
+        body: u32,
+        pose: &Isometry3<f64>,
+        nodes: &[u32],
+        grasp_force_limit: Option<f64>,
+    ) -> Result<(), String> {
+        let held = match grasp_force_limit {
+            Some(limit) => {
+                let params = GraspParams::for_gripper(limit, nodes.len());
+                self.grasp(body, *pose, nodes, params)
+            }
+            None => self.attach_to_body(body, *pose, nodes),
+        };
+        held.map(|_| ()).map_err(|e| e.to_string())
+    }
+
     fn step_coupled(
         &mut self,
         dt: f64,

@@ -29,7 +29,7 @@ use modesuite_engine::deformable::{add_deformable_systems, DeformableContext, De
 use modesuite_engine::registry::{BodyCompileContext, BodyKind, CompiledBody};
 use modesuite_engine::scene::{NodeSelect, SceneError};
 use modesuite_engine::{DeformableSystems, Plugin, SimApp};
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use serde::Deserialize;
 
 use crate::lanes::RowCache;
@@ -141,6 +141,21 @@ pub struct CompiledCloth {
 pub type PbdContext = DeformableContext<Cloth>;
 
 impl DeformableSolver for Cloth {
+    /// The particles move; their velocities are kept as they are.
+    fn move_rigidly(
+        &mut self,
+        positions: &[Vector3<f64>],
+        rotation: &UnitQuaternion<f64>,
+    ) -> Result<(), String> {
+        let _ = rotation;
+        self.set_positions(positions).map_err(|e| e.to_string())
+    }
+
+    fn add_velocity(&mut self, dv: &Vector3<f64>) -> Result<(), String> {
+        let vel: Vec<Vector3<f64>> = self.velocities().iter().map(|v| v + dv).collect();
+        self.set_velocities(&vel).map_err(|e| e.to_string())
+    }
+
     fn step_coupled(
         &mut self,
         dt: f64,

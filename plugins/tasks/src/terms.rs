@@ -8,9 +8,9 @@
 use std::sync::Arc;
 
 use modesuite_engine::registry::{TermEntry, TermKind};
+use modesuite_engine::surface::{Region, Surface};
 use modesuite_engine::terms::WorldView;
 use modesuite_engine::SimApp;
-use modesuite_pbd::{Cloth, Region};
 use modesuite_robots::RobotObservation;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::de::DeserializeOwned;
@@ -133,8 +133,8 @@ pub struct TaskCtx<'a> {
     pub action: &'a [f32],
     /// The previous step's action (zeros at the start of an episode).
     pub prev_action: &'a [f32],
-    /// Cloth objects by name.
-    pub cloths: &'a [(&'a str, &'a Cloth)],
+    /// Deformable objects with a surface (cloths, solids), by name.
+    pub surfaces: &'a [(&'a str, Surface<'a>)],
     /// Nominal base height of the robot (stability terms).
     pub base_height: f64,
     /// Names of the scene objects the robot touches.
@@ -150,13 +150,15 @@ impl TaskCtx<'_> {
         self.points[id.0]
     }
 
-    /// A cloth by object name.
-    pub fn cloth(&self, name: &str) -> Result<&Cloth, String> {
-        self.cloths
+    /// The surface of a deformable object by name.
+    pub fn surface(&self, name: &str) -> Result<&Surface<'_>, String> {
+        self.surfaces
             .iter()
             .find(|(n, _)| *n == name)
-            .map(|(_, c)| *c)
-            .ok_or_else(|| format!("object \"{name}\" is not a pbd.cloth"))
+            .map(|(_, s)| s)
+            .ok_or_else(|| {
+                format!("object \"{name}\" is not a deformable object with a surface (a cloth or a solid)")
+            })
     }
 }
 
@@ -758,7 +760,7 @@ pub fn register_library(app: &mut SimApp) {
         "fraction of a cloth's particles over the xy rectangle [min, max] (higher than `above`); with `at_most`/`at_least` a 0/1 predicate",
         cloth_region_term(|cloth, region, p| {
             let above = p.above.unwrap_or(f64::NEG_INFINITY);
-            let pos = cloth.positions();
+            let pos = cloth.nodes;
             let k = pos
                 .iter()
                 .filter(|q| region.contains_xy(q) && q.z > above)
@@ -808,13 +810,13 @@ pub fn register_library(app: &mut SimApp) {
 /// A term over a cloth and an xy region: `f` gives the fraction, [`RegionParams::output`] turns
 /// it into the term's value.
 fn cloth_region_term(
-    f: impl Fn(&Cloth, &Region, &RegionParams) -> f64 + Send + Sync + Copy + 'static,
+    f: impl Fn(&Surface<'_>, &Region, &RegionParams) -> f64 + Send + Sync + Copy + 'static,
 ) -> Arc<dyn TaskTermFactory> {
     factory(move |p: RegionParams, cfg| {
         cfg.object(&p.object)?;
         let region = region(&p)?;
         Ok(term(1, move |c, out| {
-            out[0] = p.output(f(c.cloth(&p.object)?, &region, &p));
+            out[0] = p.output(f(c.surface(&p.object)?, &region, &p));
             Ok(())
         }))
     })

@@ -5,9 +5,9 @@ use bevy_ecs::prelude::*;
 use modesuite_engine::components::{DeformableNodes, Object};
 use modesuite_engine::env::{ActionBuffer, ObservationBuffer, StepSignals};
 use modesuite_engine::rng::EnvRng;
+use modesuite_engine::surface::Surface;
 use modesuite_engine::terms::{check_finite, world_view, ViewQuery};
 use modesuite_engine::{RigidContext, SimClock, SimErrors, SimSettings};
-use modesuite_pbd::{Cloth, PbdContext};
 use modesuite_render::CameraImages;
 use modesuite_robots::{RobotObservation, Robots};
 use nalgebra::Vector3;
@@ -85,7 +85,6 @@ pub(super) struct TaskWorld<'w, 's> {
     nodes: Query<'w, 's, &'static DeformableNodes>,
     clock: Res<'w, SimClock>,
     settings: Res<'w, SimSettings>,
-    pbd: Option<Res<'w, PbdContext>>,
     action: Res<'w, ActionBuffer>,
     names: Query<'w, 's, &'static Object>,
     images: Option<Res<'w, CameraImages>>,
@@ -121,14 +120,14 @@ impl TaskWorld<'_, '_> {
                 .filter_map(|(_, e)| self.names.get(e).ok())
                 .map(|o| o.name.as_str())
                 .collect();
-            let cloths: Vec<(&str, &Cloth)> = match self.pbd.as_deref() {
-                Some(p) => task
-                    .cloths
-                    .iter()
-                    .filter_map(|(n, e)| p.get(*e).map(|c| (n.as_str(), c)))
-                    .collect(),
-                None => Vec::new(),
-            };
+            let surfaces: Vec<(&str, Surface)> = task
+                .surfaces
+                .iter()
+                .filter_map(|(n, e, triangles)| {
+                    let nodes = &self.nodes.get(*e).ok()?.0;
+                    Some((n.as_str(), Surface { nodes, triangles }))
+                })
+                .collect();
             let zeros = vec![0.0f32; action.len()];
             let prev = if state.prev_action.len() == action.len() {
                 &state.prev_action[..]
@@ -143,7 +142,7 @@ impl TaskWorld<'_, '_> {
                 points: &points,
                 action,
                 prev_action: prev,
-                cloths: &cloths,
+                surfaces: &surfaces,
                 base_height: task.base_height,
                 touching: &touching,
                 images: self.images.as_deref(),

@@ -3,13 +3,12 @@
 
 use bevy_ecs::prelude::*;
 use modesuite_engine::components::{DeformableNodes, Object};
+use modesuite_engine::deformable::{deformable_mut, DeformableSolver};
 use modesuite_engine::math::{pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier};
 use modesuite_engine::rigid::RigidRef;
 use modesuite_engine::rng::EnvRng;
 use modesuite_engine::scene::NamedFrames;
 use modesuite_engine::{Phase, RigidContext, SimClock, SimErrors};
-use modesuite_fem::FemContext;
-use modesuite_pbd::PbdContext;
 use modesuite_robots::Robots;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
@@ -39,16 +38,40 @@ pub(super) struct EventWorld<'w, 's> {
     robots: Option<Res<'w, Robots>>,
     rigid: Option<ResMut<'w, RigidContext>>,
     rng: ResMut<'w, EnvRng>,
-    fem: Option<ResMut<'w, FemContext>>,
-    pbd: Option<ResMut<'w, PbdContext>>,
     nodes: Query<'w, 's, (Entity, &'static Object, &'static mut DeformableNodes)>,
     bodies: Query<'w, 's, (&'static Object, &'static RigidRef)>,
     errors: ResMut<'w, SimErrors>,
+    /// Changes to deformable bodies, made through the solver-neutral interface
+    /// ([`deformable_mut`]) in event order right after the system (an `ApplyDeferred` follows
+    /// both event systems), before anything steps or reads the solvers.
+    commands: Commands<'w, 's>,
+}
+
+/// Queues `f` on the solver of deformable entity `e`; its failure becomes the env's error,
+/// named like a failed event.
+fn on_solver(
+    commands: &mut Commands,
+    event: &str,
+    e: Entity,
+    f: impl FnOnce(&mut dyn DeformableSolver) -> Result<(), String> + Send + 'static,
+) {
+    let event = event.to_string();
+    commands.queue(move |world: &mut World| {
+        let r = match deformable_mut(world, e) {
+            Some(solver) => f(solver),
+            None => Err(format!("entity {e} has no deformable solver body")),
+        };
+        if let Err(msg) = r {
+            world
+                .resource_mut::<SimErrors>()
+                .raise(format!("task event \"{event}\": {msg}"));
+        }
+    });
 }
 
 impl EventWorld<'_, '_> {
-    /// Moves a deformable rigidly (its solver and its nodes component).
-    fn move_object(&mut self, name: &str, iso: &Isometry3<f64>) -> Result<(), String> {
+    /// Moves a deformable rigidly (its nodes component now, its solver right after the system).
+    fn move_object(&mut self, event: &str, name: &str, iso: &Isometry3<f64>) -> Result<(), String> {
         let Some((e, _, mut n)) = self.nodes.iter_mut().find(|(_, o, _)| o.name == name) else {
             return Err(format!(
                 "object \"{name}\" is not a deformable (fem.solid, pbd.cloth) a task can move"
@@ -58,35 +81,19 @@ impl EventWorld<'_, '_> {
             n.0.iter()
                 .map(|p| (iso * Point3::from(*p)).coords)
                 .collect();
-        if let Some(s) = self.fem.as_deref_mut().and_then(|f| f.get_mut(e)) {
-            let vel: Vec<Vector3<f64>> = s.velocities().iter().map(|v| iso.rotation * v).collect();
-            s.set_positions_velocities(&moved, &vel)
-                .map_err(|e| e.to_string())?;
-        } else if let Some(c) = self.pbd.as_deref_mut().and_then(|p| p.get_mut(e)) {
-            c.set_positions(&moved).map_err(|e| e.to_string())?;
-        } else {
-            return Err(format!(
-                "object \"{name}\" is not a deformable this task can move"
-            ));
-        }
+        let (positions, rotation) = (moved.clone(), iso.rotation);
+        on_solver(&mut self.commands, event, e, move |s| {
+            s.move_rigidly(&positions, &rotation)
+        });
         n.0 = moved;
         Ok(())
     }
 
     /// Adds `dv` to the velocity of a deformable's nodes or of a free rigid body.
-    fn push(&mut self, name: &str, dv: Vector3<f64>) -> Result<(), String> {
+    fn push(&mut self, event: &str, name: &str, dv: Vector3<f64>) -> Result<(), String> {
         if let Some((e, _, _)) = self.nodes.iter().find(|(_, o, _)| o.name == name) {
-            if let Some(s) = self.fem.as_deref_mut().and_then(|f| f.get_mut(e)) {
-                let vel: Vec<Vector3<f64>> = s.velocities().iter().map(|v| v + dv).collect();
-                let pos = s.positions().to_vec();
-                return s
-                    .set_positions_velocities(&pos, &vel)
-                    .map_err(|e| e.to_string());
-            }
-            if let Some(c) = self.pbd.as_deref_mut().and_then(|p| p.get_mut(e)) {
-                let vel: Vec<Vector3<f64>> = c.velocities().iter().map(|v| v + dv).collect();
-                return c.set_velocities(&vel).map_err(|e| e.to_string());
-            }
+            on_solver(&mut self.commands, event, e, move |s| s.add_velocity(&dv));
+            return Ok(());
         }
         let rigid = self.rigid.as_deref_mut().ok_or("no rigid world")?;
         let (_, body) = self
@@ -109,10 +116,10 @@ impl EventWorld<'_, '_> {
     }
 
     /// Draws and applies one event (`Startup`/`Interval` wrappers run their event now).
-    fn apply(&mut self, robot_name: &str, e: &EventDesc) -> Result<(), String> {
+    fn apply(&mut self, robot_name: &str, event: &str, e: &EventDesc) -> Result<(), String> {
         match e {
             EventDesc::Startup(inner) | EventDesc::Interval { event: inner, .. } => {
-                self.apply(robot_name, inner)
+                self.apply(robot_name, event, inner)
             }
             EventDesc::RobotPose { xy, yaw, carry } => {
                 let dx = self.rng.range(-xy, *xy);
@@ -157,7 +164,7 @@ impl EventWorld<'_, '_> {
                     .set_joint_positions(rigid, &q)
                     .map_err(|e| e.to_string())?;
                 for c in carry {
-                    self.move_object(c, &iso)?;
+                    self.move_object(event, c, &iso)?;
                 }
                 Ok(())
             }
@@ -185,6 +192,7 @@ impl EventWorld<'_, '_> {
             EventDesc::ObjectOffset { object, xy } => {
                 let d = Vector3::new(self.rng.range(-xy, *xy), self.rng.range(-xy, *xy), 0.0);
                 self.move_object(
+                    event,
                     object,
                     &Isometry3::from_parts(Translation3::from(d), UnitQuaternion::identity()),
                 )
@@ -194,17 +202,19 @@ impl EventWorld<'_, '_> {
                 youngs_modulus,
             } => {
                 let value = self.rng.range(youngs_modulus.0, youngs_modulus.1);
-                let solid = self
+                let (e, _, _) = self
                     .nodes
                     .iter()
                     .find(|(_, o, _)| o.name == *object)
-                    .and_then(|(e, _, _)| self.fem.as_deref_mut()?.get_mut(e))
                     .ok_or_else(|| {
-                        format!("object \"{object}\" is not a fem.solid (Material sets a solid's Young's modulus)")
+                        format!("object \"{object}\" is not a deformable (Material sets a solid's Young's modulus)")
                     })?;
-                solid
-                    .set_youngs_modulus(value)
-                    .map_err(|er| format!("object \"{object}\": {er}"))
+                let object = object.clone();
+                on_solver(&mut self.commands, event, e, move |s| {
+                    s.set_youngs_modulus(value)
+                        .map_err(|er| format!("object \"{object}\": {er}"))
+                });
+                Ok(())
             }
             EventDesc::Push { object, velocity } => {
                 let (x, y, z) = *velocity;
@@ -213,14 +223,14 @@ impl EventWorld<'_, '_> {
                     self.rng.range(-y, y),
                     self.rng.range(-z, z),
                 );
-                self.push(object, dv)
+                self.push(event, object, dv)
             }
         }
     }
 
     /// Applies `e` and reports a failure as the env's error.
     fn run(&mut self, robot_name: &str, name: &str, e: &EventDesc) {
-        if let Err(msg) = self.apply(robot_name, e) {
+        if let Err(msg) = self.apply(robot_name, name, e) {
             self.errors.raise(format!("task event \"{name}\": {msg}"));
         }
     }

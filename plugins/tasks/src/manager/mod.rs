@@ -118,6 +118,9 @@ pub struct TaskModel {
     pub events: Vec<(String, EventDesc)>,
     /// Named points and targets with their ids (published in [`TaskPoints`]).
     pub named: Vec<(String, PointId)>,
+    /// The surface triangles of every deformable object, by name, as its body kind gives them
+    /// (what the region terms measure).
+    pub surfaces: BTreeMap<String, Arc<Vec<[u32; 3]>>>,
 }
 
 impl TaskModel {
@@ -149,6 +152,9 @@ enum Resolved {
     },
 }
 
+/// A deformable object with a surface: name, entity, triangles over its nodes.
+type SurfaceObject = (String, Entity, Arc<Vec<[u32; 3]>>);
+
 /// The task of one env: the model and the points resolved at spawn (immutable).
 #[derive(Resource, Clone)]
 pub struct Task {
@@ -163,8 +169,8 @@ pub struct Task {
     pub leg_joints: Vec<usize>,
     /// Base height at spawn.
     pub base_height: f64,
-    /// Cloth objects (name, entity).
-    cloths: Vec<(String, Entity)>,
+    /// Deformable objects with a surface.
+    surfaces: Vec<SurfaceObject>,
     /// Per observation group: the lengths of a frame's items, in buffer order: the items of
     /// [`spaces::frame_items`] for a group with images, the whole frame otherwise. A group's
     /// buffer is item by item, each item's `history` frames oldest first (for one item or one
@@ -274,13 +280,18 @@ pub fn add_task_systems(app: &mut SimApp) {
             TaskSystems::Observe.in_set(EnvSystems::Observe),
         ),
     );
+    // The events' changes to deformable solvers are commands: applied right after each system.
     app.add_systems(
         modesuite_engine::EnvStep,
-        task_reset.in_set(TaskSystems::Reset),
+        (task_reset, ApplyDeferred)
+            .chain()
+            .in_set(TaskSystems::Reset),
     );
     app.add_systems(
         modesuite_engine::EnvStep,
-        task_interval_events.in_set(TaskSystems::Interval),
+        (task_interval_events, ApplyDeferred)
+            .chain()
+            .in_set(TaskSystems::Interval),
     );
     app.add_systems(
         modesuite_engine::EnvStep,

@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
 use modesuite_engine::components::{DeformableNodes, Object, Pose};
+use modesuite_engine::deformable::deformable_mut;
 use modesuite_engine::registry::{CompiledSection, SceneSection, SectionCompileContext};
+use modesuite_engine::scene::BodyModel;
 use modesuite_engine::scene::SceneError;
 use modesuite_engine::{RigidContext, SimApp, Space, Spaces};
-use modesuite_fem::{FemContext, GraspParams};
-use modesuite_pbd::PbdContext;
 use modesuite_render::CameraRequests;
 use modesuite_robots::Robots;
 use nalgebra::{Isometry3, Point3, Vector3};
@@ -19,8 +19,8 @@ use super::compile::{check_event, configure, resolve_extends, scene_cameras, ser
 use super::events::TaskStartup;
 use super::spaces::{frame_items, has_images, policy_space};
 use super::{
-    Group, NamedTerm, ObsTerm, Resolved, RewardTerm, Target, Task, TaskModel, TaskObservations,
-    TaskPoints, TaskSection, TaskState,
+    Group, NamedTerm, ObsTerm, Resolved, RewardTerm, SurfaceObject, Target, Task, TaskModel,
+    TaskObservations, TaskPoints, TaskSection, TaskState,
 };
 use crate::desc::{PointRef, TaskDesc};
 use crate::terms::{tracked_nodes, Configure, Dims};
@@ -228,7 +228,18 @@ impl SceneSection for TaskSection {
         }
         let points = cfg.table;
         let success_bonus = desc.success_bonus.unwrap_or(0.0);
+        let surfaces = ctx
+            .objects
+            .iter()
+            .filter_map(|o| match &o.body {
+                BodyModel::Plugin { kind, compiled } => kind
+                    .surface_triangles(compiled)
+                    .map(|t| (o.name.clone(), Arc::new(t))),
+                _ => None,
+            })
+            .collect();
         Ok(Arc::new(TaskModel {
+            surfaces,
             named: named_ids,
             robot: desc.robot.clone().unwrap_or_else(|| "robot".to_string()),
             events: desc.events.clone().into_iter().collect(),
@@ -370,21 +381,11 @@ impl SceneSection for TaskSection {
                 PointRef::Point(_) => return Err(serr(path, format!("{p:?}"), "a resolved point")),
             });
         }
-        let cloths: Vec<(String, Entity)> = app
-            .world
-            .get_resource::<PbdContext>()
-            .map(|c| {
-                c.bodies
-                    .iter()
-                    .filter_map(|b| {
-                        by_name
-                            .iter()
-                            .find(|(_, (e, _, _))| *e == b.entity)
-                            .map(|(n, _)| (n.clone(), b.entity))
-                    })
-                    .collect()
-            })
-            .unwrap_or_default();
+        let surfaces: Vec<SurfaceObject> = model
+            .surfaces
+            .iter()
+            .filter_map(|(n, t)| by_name.get(n).map(|(e, _, _)| (n.clone(), *e, t.clone())))
+            .collect();
         if let Some(h) = &model.desc.held {
             let hpath = format!("{path}.held");
             let (e, l) = local(&h.object)?;
@@ -410,24 +411,16 @@ impl SceneSection for TaskSection {
                 .resource::<RigidContext>()
                 .body_pose(body)
                 .ok_or_else(|| serr(&hpath, model.robot.clone(), "a robot with a gripper body"))?;
-            let mut fem = app
-                .world
-                .get_resource_mut::<FemContext>()
-                .ok_or_else(|| serr(&hpath, h.object.clone(), "the FEM plugin"))?;
-            let solid = fem.get_mut(e).ok_or_else(|| {
+            let solver = deformable_mut(&mut app.world, e).ok_or_else(|| {
                 serr(
                     &format!("{hpath}.object"),
                     h.object.clone(),
-                    "a fem.solid object",
+                    "a deformable object whose solver can hold nodes (fem.solid)",
                 )
             })?;
-            let held = if h.grasp {
-                let params = GraspParams::for_gripper(force_limit, nodes.len());
-                solid.grasp(body, pose, &nodes, params)
-            } else {
-                solid.attach_to_body(body, pose, &nodes)
-            };
-            held.map_err(|er| serr(&hpath, format!("{} nodes", nodes.len()), er.to_string()))?;
+            solver
+                .hold_nodes(body, &pose, &nodes, h.grasp.then_some(force_limit))
+                .map_err(|er| serr(&hpath, format!("{} nodes", nodes.len()), er))?;
         }
         let stage_slots = n_stages(&points);
         let frame_item_lens = model
@@ -452,7 +445,7 @@ impl SceneSection for TaskSection {
             arm_joints,
             leg_joints,
             base_height,
-            cloths,
+            surfaces,
             frame_item_lens,
         };
         let observation = model
