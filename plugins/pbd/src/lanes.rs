@@ -257,7 +257,7 @@ const CACHED_ROWS: usize = 8;
 /// rows are a pure function of the mesh, material, substep length and inverse masses, so a cloth
 /// whose rows come out bitwise equal to a cached set takes that set and drops its own. 16 envs
 /// of a cloth task then read one copy of their largest per-step data instead of 16, which
-/// otherwise fall out of the caches between their steps (BENCHMARKS.md, Tasks).
+/// otherwise fall out of the caches between their steps (docs/bench-history.md, Tasks).
 #[derive(Debug, Default)]
 pub(crate) struct RowCache {
     entries: Mutex<Vec<Arc<SolverRows>>>,
