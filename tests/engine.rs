@@ -342,6 +342,11 @@ fn bad_input_is_reported_with_object_field_and_value() {
     let e = compile_text("Scene(physics: (substeps: 2.5))").unwrap_err();
     println!("{e}");
     assert!(matches!(e, SceneError::Syntax { .. }));
+    assert!(
+        e.to_string()
+            .ends_with("Expected comma (hint: a float where an integer is expected, e.g. `4.0` for a count, also reads like this)"),
+        "{e}"
+    );
 }
 
 #[test]

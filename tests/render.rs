@@ -7,7 +7,8 @@ use modesuite::engine::scene;
 use modesuite::prelude::*;
 use modesuite::render::config::project;
 use modesuite::render::{
-    render_batch, CameraDesc, CameraFrame, CameraImages, CameraRequests, EnvRenderer, RenderDevice,
+    render_batch, CameraDesc, CameraFrame, CameraImages, CameraRequests, EnvRenderer, RenderConfig,
+    RenderDevice,
 };
 use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 
@@ -405,9 +406,10 @@ fn scene_cameras_are_validated_with_located_errors() {
 fn frame_bytes_are_consistent() {
     let f = CameraFrame::default();
     assert!(f.rgb.is_empty() && f.depth.is_empty());
+    let camera = r#"(name: "c", width: 33, height: 17, pose: (pos: (0.0, 0.0, 2.0)), look_at: (0.0, 0.0, 0.0))"#;
     let (env, mut r) = setup(
         r#"(name: "ground", shape: Plane(size: (10.0, 10.0)), body: Static)"#,
-        r#"(name: "c", width: 33, height: 17, pose: (pos: (0.0, 0.0, 2.0)), look_at: (0.0, 0.0, 0.0))"#,
+        camera,
     );
     // An odd width exercises the padded readback rows.
     let f = render(&mut r, &env, "c");
@@ -421,7 +423,19 @@ fn frame_bytes_are_consistent() {
         .fold(0.0f32, f32::max);
     println!("odd-width frame: depth error {max_err:e} m");
     assert!(max_err < 1e-3);
-    let _ = CameraDesc::looking_at("x", 1, 1, 60.0, [0.0; 3], [1.0, 0.0, 0.0]);
+    // The frame reports the camera it was taken with, which `CameraDesc::looking_at` makes in
+    // code the same as the scene's text does.
+    let made = CameraDesc::looking_at("c", 33, 17, 60.0, [0.0, 0.0, 2.0], [0.0; 3]);
+    let parsed = RenderConfig::parse(&format!("(cameras: [{camera}])")).unwrap();
+    assert_eq!(parsed.camera("c"), Some(&made));
+    assert_eq!((f.width, f.height), (made.width, made.height));
+    assert_eq!(f.pinhole, made.pinhole());
+    let pose = made.parent_from_camera();
+    assert!(
+        (f.world_from_camera.to_homogeneous() - pose.to_homogeneous()).norm() < 1e-12,
+        "{} vs {pose}",
+        f.world_from_camera
+    );
 }
 
 /// Pixels where `on` differs from `off` and has the hue of `rgb` (each channel relative to the

@@ -22,11 +22,43 @@ pub fn have_avx2() -> bool {
     }
 }
 
-/// Defines `$vis fn $name(avx2: bool, args...) -> ret` that calls the `#[inline(always)]`
-/// function `$body(args...)` either in an AVX2-enabled copy (`$avx`, where `avx2` is true) or in
-/// the baseline one. Callers pass `avx2` true only where [`have_avx2`] said so.
+/// Which copy of an [`avx2_dispatch!`](crate::avx2_dispatch) kernel runs: the baseline one, or
+/// the AVX2 one. A value asking for AVX2 can only be made by [`Simd::detect`], which checks the
+/// CPU, so safe code cannot run AVX2 instructions on a machine without them; [`Simd::baseline`]
+/// is always available (tests compare the two copies). Copied like a `bool`, and as cheap.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Simd {
+    /// True only where [`have_avx2`] found the feature (the field is private: see [`Simd::detect`]).
+    avx2: bool,
+}
+
+impl Simd {
+    /// The baseline copies, on any machine.
+    #[inline]
+    pub const fn baseline() -> Self {
+        Simd { avx2: false }
+    }
+
+    /// The AVX2 copies where this machine has AVX2 ([`have_avx2`]), the baseline ones elsewhere.
+    #[inline]
+    pub fn detect() -> Self {
+        Simd { avx2: have_avx2() }
+    }
+
+    /// Whether the AVX2 copies run.
+    #[inline]
+    pub const fn avx2(self) -> bool {
+        self.avx2
+    }
+}
+
+/// Defines `$vis fn $name(simd: Simd, args...) -> ret` that calls the `#[inline(always)]`
+/// function `$body(args...)` either in an AVX2-enabled copy (`$avx`, where [`Simd::avx2`] is
+/// true, which [`Simd::detect`] allows only where the CPU has AVX2) or in the baseline one.
 ///
 /// ```
+/// use modesuite_engine::simd::Simd;
+///
 /// #[inline(always)]
 /// fn sum_body(x: &[f64]) -> f64 {
 ///     x.iter().sum()
@@ -36,8 +68,10 @@ pub fn have_avx2() -> bool {
 ///     fn sum / sum_avx2 => sum_body(x: &[f64]) -> f64
 /// }
 /// let x = [0.1, 0.2, 0.3];
-/// let avx2 = modesuite_engine::simd::have_avx2();
-/// assert_eq!(sum(avx2, &x).to_bits(), sum(false, &x).to_bits());
+/// assert_eq!(
+///     sum(Simd::detect(), &x).to_bits(),
+///     sum(Simd::baseline(), &x).to_bits()
+/// );
 /// ```
 #[macro_export]
 macro_rules! avx2_dispatch {
@@ -52,13 +86,14 @@ macro_rules! avx2_dispatch {
         $(#[$m])*
         #[inline(never)]
         #[allow(clippy::too_many_arguments)]
-        $vis fn $name(avx2: bool, $($arg: $ty),*) $(-> $ret)? {
+        $vis fn $name(simd: $crate::simd::Simd, $($arg: $ty),*) $(-> $ret)? {
             #[cfg(target_arch = "x86_64")]
-            if avx2 {
-                // SAFETY: callers pass `avx2` true only where `have_avx2()` found the feature.
+            if simd.avx2() {
+                // SAFETY: a `Simd` with `avx2()` true is made only by `Simd::detect`, where
+                // `have_avx2()` found the feature.
                 return unsafe { $avx($($arg),*) };
             }
-            let _ = avx2;
+            let _ = simd;
             $body($($arg),*)
         }
     };

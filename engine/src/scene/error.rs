@@ -72,7 +72,7 @@ impl SceneError {
     /// Converts a RON error to a syntax error; `hint` explains common mistakes.
     pub fn from_ron(file: &str, e: &ron::error::SpannedError) -> Self {
         let mut message = e.code.to_string();
-        if message.contains("Expected comma") || message.contains("ExpectedComma") {
+        if e.code == ron::Error::ExpectedComma {
             message.push_str(" (hint: a float where an integer is expected, e.g. `4.0` for a count, also reads like this)");
         }
         Self::Syntax {

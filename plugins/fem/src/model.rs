@@ -233,7 +233,7 @@ fn gradient_lanes_body(
 }
 
 modesuite_engine::avx2_dispatch! {
-    /// [`gradient_lanes_body`], with the AVX2 copy where `avx2`.
+    /// [`gradient_lanes_body`], with the AVX2 copy where `simd` allows.
     fn gradient_lanes / gradient_lanes_avx2 => gradient_lanes_body(
         elements: &[[u32; 10]],
         element_lanes: &[ElementLanes],
@@ -543,7 +543,7 @@ impl SolidModel {
     ) -> KernelStats {
         if damping.is_none() {
             return gradient_lanes(
-                modesuite_engine::simd::have_avx2(),
+                modesuite_engine::simd::Simd::detect(),
                 &self.mesh.elements,
                 &self.lanes,
                 &self.energy,
@@ -684,10 +684,14 @@ mod tests {
             }
             let mut want = vec![Vector3::zeros(); x.len()];
             let reference = m.kernel_scalar(&x, Some(&mut want), None, true);
-            for avx2 in [false, modesuite_engine::simd::have_avx2()] {
+            for simd in [
+                modesuite_engine::simd::Simd::baseline(),
+                modesuite_engine::simd::Simd::detect(),
+            ] {
+                let avx2 = simd.avx2();
                 let run = |grad: Option<&mut [Vector3<f64>]>, with_energy: bool| {
                     gradient_lanes(
-                        avx2,
+                        simd,
                         &m.mesh.elements,
                         &m.lanes,
                         &m.energy,

@@ -9,7 +9,7 @@
 //! rest state and reused as the PCG preconditioner.
 
 use crate::error::FemError;
-use modesuite_engine::simd::have_avx2;
+use modesuite_engine::simd::Simd;
 use nalgebra::{Matrix3, Vector3};
 use std::sync::Arc;
 
@@ -278,7 +278,7 @@ impl ProfileCholesky {
             }
         }
         let mut dinv = vec![0.0; n];
-        if let Err((i, d)) = kernels::factor(have_avx2(), &mut a, &mut dinv, first, start) {
+        if let Err((i, d)) = kernels::factor(Simd::detect(), &mut a, &mut dinv, first, start) {
             return Err(FemError::NotPositiveDefinite(format!(
                 "pivot {d:e} at dof {} of node {}",
                 i % 3,
@@ -308,7 +308,7 @@ impl ProfileCholesky {
             self.work[3 * ni + 2] = v.z;
         }
         kernels::solve(
-            have_avx2(),
+            Simd::detect(),
             &mut self.work,
             &self.vals,
             &self.dinv,
@@ -407,14 +407,14 @@ mod kernels {
     }
 
     modesuite_engine::avx2_dispatch! {
-        /// Factors in place (see `factor_body`), with the AVX2 copy where `avx2`.
+        /// Factors in place (see `factor_body`), with the AVX2 copy where `simd` allows.
         pub(super) fn factor / factor_avx2 => factor_body(
             a: &mut [f64], dinv: &mut [f64], first: &[u32], start: &[usize]
         ) -> Result<(), (usize, f64)>
     }
 
     modesuite_engine::avx2_dispatch! {
-        /// Solves in place (see `solve_body`), with the AVX2 copy where `avx2`.
+        /// Solves in place (see `solve_body`), with the AVX2 copy where `simd` allows.
         pub(super) fn solve / solve_avx2 => solve_body(
             y: &mut [f64], vals: &[f64], dinv: &[f64], first: &[u32], start: &[usize]
         )
@@ -645,9 +645,9 @@ pub(crate) mod tests {
         assert!(worst < 1e-12);
         let (mut base, mut wide) = (a0.clone(), a0);
         let (mut dbase, mut dwide) = (vec![0.0; n], vec![0.0; n]);
-        kernels::factor(false, &mut base, &mut dbase, &p.first, &p.start).unwrap();
-        let avx2 = have_avx2();
-        kernels::factor(avx2, &mut wide, &mut dwide, &p.first, &p.start).unwrap();
+        kernels::factor(Simd::baseline(), &mut base, &mut dbase, &p.first, &p.start).unwrap();
+        let simd = Simd::detect();
+        kernels::factor(simd, &mut wide, &mut dwide, &p.first, &p.start).unwrap();
         assert!(base
             .iter()
             .zip(&wide)
@@ -658,10 +658,13 @@ pub(crate) mod tests {
             .all(|(a, b)| a.to_bits() == b.to_bits()));
         let rhs: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
         let (mut y0, mut y1) = (rhs.clone(), rhs);
-        kernels::solve(false, &mut y0, &base, &dbase, &p.first, &p.start);
-        kernels::solve(avx2, &mut y1, &wide, &dwide, &p.first, &p.start);
+        kernels::solve(Simd::baseline(), &mut y0, &base, &dbase, &p.first, &p.start);
+        kernels::solve(simd, &mut y1, &wide, &dwide, &p.first, &p.start);
         assert!(y0.iter().zip(&y1).all(|(a, b)| a.to_bits() == b.to_bits()));
-        println!("AVX2 available: {avx2}; both kernels gave the same bits");
+        println!(
+            "AVX2 available: {}; both kernels gave the same bits",
+            simd.avx2()
+        );
     }
 
     #[test]

@@ -178,7 +178,7 @@ pub struct Cloth {
     v: Vec<P4>,
     prev: Vec<P4>,
     /// Whether the AVX2 versions of the kernels run (same results, see [`lanes`]).
-    avx2: bool,
+    avx2: lanes::Simd,
     /// `(n, 3)` scratch: positions / velocities at the start of the step (rollback).
     save_pos: Vec<Vector3<f64>>,
     save_vel: Vec<Vector3<f64>>,
@@ -478,7 +478,7 @@ impl Cloth {
             x: positions.iter().map(P4::from_v).collect(),
             v: vec![P4::ZERO; n],
             prev: positions.iter().map(P4::from_v).collect(),
-            avx2: lanes::have_avx2(),
+            avx2: lanes::Simd::detect(),
             save_pos: positions.to_vec(),
             save_vel: vec![Vector3::zeros(); n],
             triangles: triangles.to_vec(),
@@ -1007,8 +1007,12 @@ impl Cloth {
     /// where the machine has it. Returns whether AVX2 is used.
     #[cfg(test)]
     pub(crate) fn use_avx2(&mut self, on: bool) -> bool {
-        self.avx2 = on && lanes::have_avx2();
-        self.avx2
+        self.avx2 = if on {
+            lanes::Simd::detect()
+        } else {
+            lanes::Simd::baseline()
+        };
+        self.avx2.avx2()
     }
 
     /// Shares this cloth's solver rows with the other cloths that use `cache` (the envs of one

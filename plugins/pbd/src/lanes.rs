@@ -257,7 +257,7 @@ const CACHED_ROWS: usize = 8;
 /// rows are a pure function of the mesh, material, substep length and inverse masses, so a cloth
 /// whose rows come out bitwise equal to a cached set takes that set and drops its own. 16 envs
 /// of a cloth task then read one copy of their largest per-step data instead of 16, which
-/// otherwise fall out of the caches between their steps (BENCHMARKS.md, Tasks).
+/// otherwise fall out of the caches between their steps (docs/bench-history.md, Tasks).
 #[derive(Debug, Default)]
 pub(crate) struct RowCache {
     entries: Mutex<Vec<Arc<SolverRows>>>,
@@ -282,7 +282,7 @@ impl RowCache {
 }
 
 use modesuite_engine::avx2_dispatch as dispatch;
-pub(crate) use modesuite_engine::simd::have_avx2;
+pub(crate) use modesuite_engine::simd::Simd;
 
 #[inline(always)]
 fn dist_row_once(pos: &mut [P4], r: &DistRow) {
@@ -322,8 +322,8 @@ impl Div4 for DivAvx {
     fn div(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
         use std::arch::x86_64::{_mm256_div_pd, _mm256_loadu_pd, _mm256_storeu_pd};
         let mut out = [0.0; 4];
-        // SAFETY: used only by `distances_once_avx2`, which runs where AVX2 was detected; the
-        // pointers are to four-element arrays.
+        // SAFETY: used only by `distances_once_avx2` and `tethers_avx2`, which run where AVX2
+        // was detected; the pointers are to four-element arrays.
         unsafe {
             let q = _mm256_div_pd(_mm256_loadu_pd(a.as_ptr()), _mm256_loadu_pd(b.as_ptr()));
             _mm256_storeu_pd(out.as_mut_ptr(), q);
@@ -383,13 +383,14 @@ fn distances_once_avx2(pos: &mut [P4], rows: &OnceRows) {
 /// (XPBD with zero multipliers: `dx_a = w_a (l0 - l) / (w_a + w_b + alpha~) n`), four rows of a
 /// colour at a time.
 #[inline(never)]
-pub(crate) fn distances_once(avx2: bool, pos: &mut [P4], rows: &OnceRows) {
+pub(crate) fn distances_once(simd: Simd, pos: &mut [P4], rows: &OnceRows) {
     #[cfg(target_arch = "x86_64")]
-    if avx2 {
-        // SAFETY: `avx2` is true only where `have_avx2()` found the feature.
+    if simd.avx2() {
+        // SAFETY: a `Simd` with `avx2()` true is made only by `Simd::detect`, where the CPU
+        // has the feature.
         return unsafe { distances_once_avx2(pos, rows) };
     }
-    let _ = avx2;
+    let _ = simd;
     distances_once_body::<DivLanes>(pos, rows)
 }
 
@@ -503,12 +504,13 @@ fn tethers_avx2(pos: &mut [P4], rows: &[(u32, u32, f64)]) {
 /// Long-range tethers to pinned particles, rows `(particle, anchor, length)`: a particle farther
 /// from its anchor than the length is moved back onto the sphere. Four rows at a time.
 #[inline(never)]
-pub(crate) fn tethers(avx2: bool, pos: &mut [P4], rows: &[(u32, u32, f64)]) {
+pub(crate) fn tethers(simd: Simd, pos: &mut [P4], rows: &[(u32, u32, f64)]) {
     #[cfg(target_arch = "x86_64")]
-    if avx2 {
-        // SAFETY: `avx2` is true only where `have_avx2()` found the feature.
+    if simd.avx2() {
+        // SAFETY: a `Simd` with `avx2()` true is made only by `Simd::detect`, where the CPU
+        // has the feature.
         return unsafe { tethers_avx2(pos, rows) };
     }
-    let _ = avx2;
+    let _ = simd;
     tether_rows_body::<DivLanes>(pos, rows)
 }

@@ -38,7 +38,7 @@
 //!   bending, tether, prediction and velocity loops are compiled a second time with AVX2
 //!   enabled, chosen at run time. Same bits either way (no fused multiply-adds; tested), same
 //!   bits as the earlier `Vector3<f64>` arrays (nalgebra's order of operations). Measured
-//!   1.5x on the reference sheet (2026-11-26, BENCHMARKS.md); an SoA layout with gathers was
+//!   1.5x on the reference sheet (2026-11-25, docs/bench-history.md); an SoA layout with gathers was
 //!   not needed: rows of one colour are gathered as whole particles.
 //! * **Gauss-Seidel in colour order**, one iteration per substep by default (8 substeps per
 //!   1/60 s step): constraints of one colour share no particle, so distance constraints are
