@@ -43,3 +43,70 @@ fn architecture_crate_table_matches_the_workspace() {
     println!("documented {documented:?}\nworkspace  {actual:?}");
     assert_eq!(documented, actual);
 }
+
+/// Issue 28: the renderer and the tasks reach deformables through the engine's solver-neutral
+/// interface, so neither crate depends on a solver crate.
+#[test]
+fn render_and_tasks_depend_on_no_solver_crate() {
+    for krate in ["plugins/render", "plugins/tasks"] {
+        let toml = std::fs::read_to_string(root().join(krate).join("Cargo.toml")).unwrap();
+        let solvers: Vec<&str> = toml
+            .lines()
+            .filter(|l| {
+                l.trim_start().starts_with("modesuite-fem")
+                    || l.trim_start().starts_with("modesuite-pbd")
+            })
+            .collect();
+        println!("{krate}: solver dependencies {solvers:?} (want none)");
+        assert!(solvers.is_empty(), "{krate} depends on {solvers:?}");
+    }
+}
+
+struct Dupes;
+
+impl modesuite::engine::Plugin for Dupes {
+    fn name(&self) -> &str {
+        "test.dupes"
+    }
+    fn build(&self, app: &mut modesuite::engine::SimApp) {
+        // the tasks plugin already registered both
+        app.register_section(modesuite::tasks::TaskSection);
+        let place = app
+            .world
+            .resource::<modesuite::tasks::Experts>()
+            .0
+            .get("place")
+            .cloned()
+            .unwrap();
+        modesuite::tasks::register_expert(app, place);
+    }
+}
+
+/// A name registered twice (a scene section, an expert) is refused, the plugin is named, the
+/// first registration stays, and the app compiles no scene until the clash is fixed.
+#[test]
+fn a_name_registered_twice_is_refused_and_named() {
+    let mut app = modesuite::make::default_app();
+    assert_eq!(app.setup_errors(), &[] as &[String]);
+    let sections = app.registry().sections.len();
+    app.add_plugins(Dupes);
+    let errors = app.setup_errors().to_vec();
+    println!("{errors:#?}");
+    assert_eq!(errors.len(), 2, "{errors:?}");
+    assert!(
+        errors[0]
+            .starts_with("plugin \"test.dupes\": scene section \"task\" is already registered"),
+        "{}",
+        errors[0]
+    );
+    assert!(
+        errors[1].starts_with("plugin \"test.dupes\": expert \"place\" is already registered"),
+        "{}",
+        errors[1]
+    );
+    assert_eq!(app.registry().sections.len(), sections);
+    let (desc, source) = modesuite::make::load_target("MoDe-Franka-Place-v0").unwrap();
+    let e = app.compile_scene(&desc, &source).err().expect("refused");
+    println!("compile: {e}");
+    assert!(e.to_string().contains("already registered"), "{e}");
+}

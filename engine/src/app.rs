@@ -262,6 +262,11 @@ pub struct SimApp {
     pub world: World,
     plugins: Vec<Arc<dyn Plugin>>,
     scene: Option<Arc<SceneModel>>,
+    /// The plugin whose `build` is running (named in setup errors).
+    building: Option<String>,
+    /// What went wrong while plugins were built (a name registered twice): the app compiles no
+    /// scene until it is fixed.
+    setup_errors: Vec<String>,
 }
 
 impl Default for SimApp {
@@ -389,6 +394,8 @@ impl SimApp {
             world,
             plugins: Vec::new(),
             scene: None,
+            building: None,
+            setup_errors: Vec::new(),
         };
         app.register_stateful::<SimClock>();
         app.register_stateful::<crate::rng::EnvRng>();
@@ -403,7 +410,9 @@ impl SimApp {
                 continue;
             }
             self.plugins.push(p.clone());
+            let outer = self.building.replace(p.name().to_string());
             p.build(self);
+            self.building = outer;
         }
         self
     }
@@ -496,29 +505,65 @@ impl SimApp {
         self.world.resource_mut::<Registry>()
     }
 
+    /// Records a setup error (a plugin's conflicting registration): the app then refuses to
+    /// compile scenes, with every recorded message. Plugins with registries of their own (the
+    /// tasks' experts) report their conflicts here too.
+    pub fn report_setup_error(&mut self, message: impl Into<String>) {
+        let by = self
+            .building
+            .as_deref()
+            .map_or(String::new(), |p| format!("plugin \"{p}\": "));
+        self.setup_errors.push(format!("{by}{}", message.into()));
+    }
+
+    /// The setup errors recorded so far (empty when every registration was accepted).
+    pub fn setup_errors(&self) -> &[String] {
+        &self.setup_errors
+    }
+
+    /// Inserts `value` under `name` into one of the registry's maps unless the name is taken
+    /// there; a second registration is refused (the first stays) and reported.
+    fn register_unique<T>(
+        &mut self,
+        what: &str,
+        name: String,
+        value: T,
+        map: fn(&mut Registry) -> &mut std::collections::BTreeMap<String, T>,
+    ) -> &mut Self {
+        let taken = match map(&mut self.registry_mut()).entry(name.clone()) {
+            std::collections::btree_map::Entry::Occupied(_) => true,
+            std::collections::btree_map::Entry::Vacant(slot) => {
+                slot.insert(value);
+                false
+            }
+        };
+        if taken {
+            self.report_setup_error(format!(
+                "{what} \"{name}\" is already registered; a second registration is refused (each name once per registry)"
+            ));
+        }
+        self
+    }
+
     /// Registers a shape generator under its name (RON: `Gen(name: "...", params: ...)`).
     pub fn register_shape(
         &mut self,
         generator: Arc<dyn crate::registry::ShapeGenerator>,
     ) -> &mut Self {
-        self.registry_mut()
-            .shapes
-            .insert(generator.name().to_string(), generator);
-        self
+        let name = generator.name().to_string();
+        self.register_unique("shape generator", name, generator, |r| &mut r.shapes)
     }
 
     /// Registers a body kind (RON: `body: Kind(kind: "fem.solid", params: ...)`).
     pub fn register_body_kind(&mut self, kind: Arc<dyn crate::registry::BodyKind>) -> &mut Self {
-        self.registry_mut()
-            .body_kinds
-            .insert(kind.name().to_string(), kind);
-        self
+        let name = kind.name().to_string();
+        self.register_unique("body kind", name, kind, |r| &mut r.body_kinds)
     }
 
     /// Registers a task term (observation, reward, termination, event) under its name.
     pub fn register_term(&mut self, term: crate::registry::TermEntry) -> &mut Self {
-        self.registry_mut().terms.insert(term.name.clone(), term);
-        self
+        let name = term.name.clone();
+        self.register_unique("term", name, term, |r| &mut r.terms)
     }
 
     /// Registers a passive force on deformables (RON: `passive_forces: [(force: "...", ...)]`).
@@ -526,10 +571,8 @@ impl SimApp {
         &mut self,
         force: Arc<dyn crate::terms::PassiveForce>,
     ) -> &mut Self {
-        self.registry_mut()
-            .forces
-            .insert(force.name().to_string(), force);
-        self
+        let name = force.name().to_string();
+        self.register_unique("passive force", name, force, |r| &mut r.forces)
     }
 
     /// Declares `len` f64 state slots for `owner` in [`crate::state::PluginStates`] (part of the
@@ -543,25 +586,21 @@ impl SimApp {
 
     /// Registers a robot under its name.
     pub fn register_robot(&mut self, robot: crate::registry::RobotEntry) -> &mut Self {
-        self.registry_mut().robots.insert(robot.name.clone(), robot);
-        self
+        let name = robot.name.clone();
+        self.register_unique("robot", name, robot, |r| &mut r.robots)
     }
 
     /// Registers the handler of a plugin-owned scene section (`extensions: { "key": ... }`).
     pub fn register_section(&mut self, section: impl crate::registry::SceneSection) -> &mut Self {
         let section: Arc<dyn crate::registry::SceneSection> = Arc::new(section);
-        self.registry_mut()
-            .sections
-            .insert(section.name().to_string(), section);
-        self
+        let name = section.name().to_string();
+        self.register_unique("scene section", name, section, |r| &mut r.sections)
     }
 
     /// Registers a sensor type under its name.
     pub fn register_sensor(&mut self, sensor: crate::registry::SensorEntry) -> &mut Self {
-        self.registry_mut()
-            .sensors
-            .insert(sensor.name.clone(), sensor);
-        self
+        let name = sensor.name.clone();
+        self.register_unique("sensor", name, sensor, |r| &mut r.sensors)
     }
 
     /// Compiles a scene description with this app's registries (body kinds, shapes).
@@ -570,6 +609,13 @@ impl SimApp {
         desc: &crate::scene::SceneDesc,
         source: &crate::scene::SceneSource,
     ) -> Result<Arc<SceneModel>, SceneError> {
+        if !self.setup_errors.is_empty() {
+            return Err(SceneError::semantic(
+                "plugins",
+                self.setup_errors.join("; "),
+                "plugins whose names do not clash",
+            ));
+        }
         crate::scene::compile(desc, source, self.registry()).map(Arc::new)
     }
 

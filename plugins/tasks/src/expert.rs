@@ -5,10 +5,14 @@
 //! points and targets), the robot's [`RobotObservation`]
 //! and controller targets, and write actions in the robot's configured action modes.
 
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use bevy_ecs::prelude::Resource;
 use modesuite_engine::rng::EnvRng;
-use modesuite_engine::{Env, RigidContext, SimSettings, Space};
+use modesuite_engine::{Env, RigidContext, SimApp, SimSettings, Space};
 use modesuite_robots::{
-    ArmMode, BaseMode, GripperMode, RobotKind, RobotObservation, RobotRuntime, Robots,
+    ActionModes, ArmMode, BaseMode, GripperMode, RobotKind, RobotObservation, RobotRuntime, Robots,
 };
 use nalgebra::{UnitQuaternion, Vector2, Vector3};
 
@@ -168,50 +172,166 @@ pub fn make_policy(kind: PolicyKind, env: &Env) -> Result<Box<dyn Policy>, Strin
                     "the {name} expert needs continuous actions (the robot has discrete keys)"
                 ));
             }
-            // Every expert drives the base by velocity; `arm_off` says whether it can do without
-            // an arm action.
-            let check = |arm_off: bool| {
-                let arm_ok = matches!(modes.arm, ArmMode::EePoseDelta | ArmMode::EePoseAbsolute)
-                    || (arm_off && modes.arm == ArmMode::Off);
-                if matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion) && arm_ok {
-                    return Ok(());
-                }
-                Err(format!(
-                    "the {name} expert drives base: Velocity or Locomotion and arm: EePoseDelta or EePoseAbsolute{}; this run has base {:?}, arm {:?}",
-                    if arm_off { " or Off" } else { "" },
-                    modes.base,
-                    modes.arm
-                ))
-            };
-            match name.as_str() {
-                "place" => {
-                    check(false)?;
-                    Ok(Box::new(PlaceExpert { robot, start: None }))
-                }
-                "curtain" => {
-                    check(true)?;
-                    Ok(Box::new(CurtainExpert { robot }))
-                }
-                "route" => {
-                    let route = task.model.desc.route.clone();
-                    if route.is_empty() {
-                        return Err("the route expert needs the task's `route` legs".into());
-                    }
-                    check(
-                        route.iter().all(|l| {
-                            l.hand.is_none() && l.hand_at.is_none() && l.hand_rpy.is_none()
-                        }),
-                    )?;
-                    Ok(Box::new(RouteExpert {
-                        robot,
-                        route,
-                        leg: 0,
-                        bias: Vector3::zeros(),
-                    }))
-                }
-                other => Err(format!("no scripted expert named \"{other}\"")),
-            }
+            let experts = env.app.world.get_resource::<Experts>();
+            let expert = experts.and_then(|x| x.0.get(&name)).ok_or_else(|| {
+                format!(
+                    "no scripted expert named \"{name}\"; registered: [{}]",
+                    experts.map_or(String::new(), |x| x
+                        .0
+                        .keys()
+                        .cloned()
+                        .collect::<Vec<_>>()
+                        .join(", "))
+                )
+            })?;
+            expert.make(&ExpertContext {
+                env,
+                task,
+                robot,
+                modes,
+            })
         }
+    }
+}
+
+/// A scripted expert, registered by name with [`register_expert`]; a task section names the
+/// one that solves it (`expert: "place"`). Plugins add their own the same way.
+pub trait Expert: Send + Sync + 'static {
+    /// Registry name.
+    fn name(&self) -> &str;
+    /// One line for listings.
+    fn description(&self) -> &str;
+    /// The expert's policy for this env's task, or why it cannot drive it (action modes,
+    /// missing task data).
+    fn make(&self, ctx: &ExpertContext) -> Result<Box<dyn Policy>, String>;
+}
+
+/// What an [`Expert`] is made for: the env, its task, the task's robot and its action modes.
+pub struct ExpertContext<'a> {
+    /// The env (after its reset).
+    pub env: &'a Env,
+    /// The env's task.
+    pub task: &'a Task,
+    /// The task's robot.
+    pub robot: String,
+    /// The robot's action modes in this run.
+    pub modes: ActionModes,
+}
+
+impl ExpertContext<'_> {
+    /// Every built-in expert drives the base by velocity and the hand by end-effector poses;
+    /// `arm_off`: it can also do without an arm action. The error names what it supports.
+    pub fn check_modes(&self, name: &str, arm_off: bool) -> Result<(), String> {
+        let modes = self.modes;
+        let arm_ok = matches!(modes.arm, ArmMode::EePoseDelta | ArmMode::EePoseAbsolute)
+            || (arm_off && modes.arm == ArmMode::Off);
+        if matches!(modes.base, BaseMode::Velocity | BaseMode::Locomotion) && arm_ok {
+            return Ok(());
+        }
+        Err(format!(
+            "the {name} expert drives base: Velocity or Locomotion and arm: EePoseDelta or EePoseAbsolute{}; this run has base {:?}, arm {:?}",
+            if arm_off { " or Off" } else { "" },
+            modes.base,
+            modes.arm
+        ))
+    }
+}
+
+/// The experts of an app by name (a resource; [`register_expert`] adds to it).
+#[derive(Resource, Clone, Default)]
+pub struct Experts(pub BTreeMap<String, Arc<dyn Expert>>);
+
+/// Registers an expert under its name; a second expert of the same name is refused (reported
+/// with [`SimApp::report_setup_error`], so the app compiles no scene).
+pub fn register_expert(app: &mut SimApp, expert: Arc<dyn Expert>) {
+    let name = expert.name().to_string();
+    let taken = match app
+        .world
+        .get_resource_or_insert_with(Experts::default)
+        .0
+        .entry(name.clone())
+    {
+        std::collections::btree_map::Entry::Occupied(_) => true,
+        std::collections::btree_map::Entry::Vacant(slot) => {
+            slot.insert(expert);
+            false
+        }
+    };
+    if taken {
+        app.report_setup_error(format!(
+            "expert \"{name}\" is already registered; a second registration is refused"
+        ));
+    }
+}
+
+/// A built-in expert: name, description, and how it is made.
+struct BuiltIn {
+    name: &'static str,
+    description: &'static str,
+    make: fn(&ExpertContext) -> Result<Box<dyn Policy>, String>,
+}
+
+impl Expert for BuiltIn {
+    fn name(&self) -> &str {
+        self.name
+    }
+    fn description(&self) -> &str {
+        self.description
+    }
+    fn make(&self, ctx: &ExpertContext) -> Result<Box<dyn Policy>, String> {
+        (self.make)(ctx)
+    }
+}
+
+/// Registers the built-in experts: `place`, `curtain` and `route`.
+pub fn register_builtin_experts(app: &mut SimApp) {
+    let builtins = [
+        BuiltIn {
+            name: "place",
+            description: "drives the base so the held rod's free end hangs over the table target (Place)",
+            make: |c| {
+                c.check_modes("place", false)?;
+                Ok(Box::new(PlaceExpert {
+                    robot: c.robot.clone(),
+                    start: None,
+                }))
+            },
+        },
+        BuiltIn {
+            name: "curtain",
+            description: "lines the base up with the curtain's frame and drives through it (Curtain)",
+            make: |c| {
+                c.check_modes("curtain", true)?;
+                Ok(Box::new(CurtainExpert {
+                    robot: c.robot.clone(),
+                }))
+            },
+        },
+        BuiltIn {
+            name: "route",
+            description: "follows the task's `route` legs: base goal poses, hand targets, gripper (Bend, Transport, Drag, Lift, Uncover, Cover)",
+            make: |c| {
+                let route = c.task.model.desc.route.clone();
+                if route.is_empty() {
+                    return Err("the route expert needs the task's `route` legs".into());
+                }
+                c.check_modes(
+                    "route",
+                    route
+                        .iter()
+                        .all(|l| l.hand.is_none() && l.hand_at.is_none() && l.hand_rpy.is_none()),
+                )?;
+                Ok(Box::new(RouteExpert {
+                    robot: c.robot.clone(),
+                    route,
+                    leg: 0,
+                    bias: Vector3::zeros(),
+                }))
+            },
+        },
+    ];
+    for b in builtins {
+        register_expert(app, Arc::new(b));
     }
 }
 

@@ -25,7 +25,9 @@ use std::path::{Path, PathBuf};
 use modesuite_engine::{Plugin, SimApp};
 
 pub use desc::{EventDesc, PointRef, TaskDesc};
-pub use expert::{make_policy, Policy, PolicyKind};
+pub use expert::{
+    make_policy, register_expert, Expert, ExpertContext, Experts, Policy, PolicyKind,
+};
 pub use manager::{
     Task, TaskModel, TaskObservations, TaskPoints, TaskSection, TaskState, TaskSystems,
 };
@@ -226,6 +228,7 @@ impl Plugin for TasksPlugin {
 
     fn build(&self, app: &mut SimApp) {
         terms::register_library(app);
+        expert::register_builtin_experts(app);
         app.register_section(TaskSection);
         app.insert_resource(TaskObservations::default());
         app.insert_resource(TaskPoints::default());

@@ -207,7 +207,7 @@ impl EventWorld<'_, '_> {
                     .iter()
                     .find(|(_, o, _)| o.name == *object)
                     .ok_or_else(|| {
-                        format!("object \"{object}\" is not a deformable (Material sets a solid's Young's modulus)")
+                        format!("object \"{object}\" is not a deformable body (Material sets the Young's modulus of a solid, e.g. a fem.solid)")
                     })?;
                 let object = object.clone();
                 on_solver(&mut self.commands, event, e, move |s| {
