@@ -493,3 +493,46 @@ fn scene_term_sections_name_unknown_terms_wrong_kinds_and_bad_params() {
         "{e}"
     );
 }
+
+/// One term registry for scenes and tasks: a compiled plugin's terms (engine terms, C ABI) work
+/// in a task section, beside the task terms, with their plugin state; the reward they add is
+/// the plugin's own figure.
+#[test]
+fn a_compiled_plugins_terms_work_in_a_task() {
+    let dir = root().join("scenes/place");
+    let text = std::fs::read_to_string(dir.join("franka.scene.ron")).unwrap();
+    let from = r#"extends: "place.task.ron","#;
+    assert!(text.contains(from));
+    let text = text.replace(
+        from,
+        r#"extends: "place.task.ron",
+            rewards: {"rod_height": (term: "acme.centroid_height", weight: 2.0, params: (object: "rod"))},
+            terminations: {"rod_fell": (term: "acme.below", params: (object: "rod", z: -1.0))},"#,
+    );
+    let desc = scene::parse_str(&text, "<place with acme terms>").expect("parses");
+    let source = SceneSource::in_memory(&dir);
+    let mut app = modesuite::make::default_app();
+    app.load_plugin(lib("plugin-trefoil"))
+        .expect("plugin loads");
+    let mut env = env_of(app, &desc, &source);
+    env.reset(Some(0));
+    let act = env.spaces().action.flat_dim();
+    for step in 0..5 {
+        let o = env.step(&vec![0.0; act]);
+        assert!(o.info.error.is_none(), "{:?}", o.info.error);
+        let term = o.info.values["reward/rod_height"];
+        let z = centroid(&nodes_of(&mut env, "rod"))[2];
+        println!("step {step}: reward/rod_height {term:.6} = 2 x rod centroid z {z:.6}");
+        assert_eq!(term.to_bits(), (2.0 * z).to_bits());
+        assert!(!o.terminated && !o.truncated);
+    }
+    // without the plugin the task names the missing term
+    let mut bare = modesuite::make::default_app();
+    let e = bare
+        .compile_scene(&desc, &source)
+        .err()
+        .expect("the term is unknown without the plugin")
+        .to_string();
+    println!("{e}");
+    assert!(e.contains("acme.centroid_height"), "{e}");
+}

@@ -8,8 +8,9 @@
 use std::sync::Arc;
 
 use modesuite_engine::registry::{TermEntry, TermKind};
+use modesuite_engine::state::PluginStates;
 use modesuite_engine::surface::{Region, Surface};
-use modesuite_engine::terms::WorldView;
+use modesuite_engine::terms::{ConfiguredTerm, Term, TermContext, WorldView};
 use modesuite_engine::SimApp;
 use modesuite_robots::RobotObservation;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -142,6 +143,49 @@ pub struct TaskCtx<'a> {
     /// The frames of the cameras rendered in this env's `Sense` pass (`None` without the
     /// render plugin).
     pub images: Option<&'a modesuite_render::CameraImages>,
+    /// State slots of plugins, for engine terms used in the task (compiled plugins keep their
+    /// state there).
+    pub states: &'a std::cell::RefCell<PluginStates>,
+}
+
+/// An engine term ([`modesuite_engine::terms::Term`], e.g. from a compiled C-ABI plugin) used in
+/// a task section: the task evaluates it through the engine's term context, so one registry of
+/// terms serves scenes and tasks alike.
+struct EngineTerm(Arc<dyn ConfiguredTerm>);
+
+impl TaskTerm for EngineTerm {
+    fn dim(&self, _: &Dims) -> usize {
+        self.0.dim()
+    }
+    fn evaluate(&self, ctx: &TaskCtx, out: &mut [f64]) -> Result<(), String> {
+        let mut states = ctx
+            .states
+            .try_borrow_mut()
+            .map_err(|_| "plugin states are in use".to_string())?;
+        let mut tc = TermContext {
+            world: ctx.world,
+            states: &mut states,
+        };
+        self.0.evaluate(&mut tc, out)
+    }
+}
+
+/// Configures a registered term for a task: a task term through its factory, an engine term
+/// (scene terms, compiled plugins' terms) through [`EngineTerm`]. `None`: the payload is
+/// neither.
+pub fn configure_any(
+    payload: &(dyn std::any::Any + Send + Sync),
+    params: &str,
+    cfg: &mut Configure,
+) -> Option<Result<Arc<dyn TaskTerm>, String>> {
+    if let Some(f) = payload.downcast_ref::<TaskTermEntry>() {
+        return Some(f.0.configure(params, cfg));
+    }
+    let term = payload.downcast_ref::<Arc<dyn Term>>()?;
+    Some(
+        term.configure(params)
+            .map(|c| Arc::new(EngineTerm(c)) as Arc<dyn TaskTerm>),
+    )
 }
 
 impl TaskCtx<'_> {

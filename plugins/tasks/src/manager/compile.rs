@@ -9,7 +9,7 @@ use modesuite_engine::registry::SectionCompileContext;
 use modesuite_engine::scene::SceneError;
 
 use crate::desc::{EventDesc, TaskDesc};
-use crate::terms::{Configure, TaskTerm, TaskTermEntry};
+use crate::terms::{configure_any, Configure, TaskTerm};
 
 /// The cameras of the scene's render section: name -> (width, height).
 pub(super) fn scene_cameras(
@@ -242,25 +242,21 @@ pub(super) fn configure(
                 "a registered task term: [{}]",
                 ctx.registry
                     .terms
-                    .iter()
-                    .filter(|(_, e)| e.payload.downcast_ref::<TaskTermEntry>().is_some())
-                    .map(|(n, _)| n.as_str())
+                    .keys()
+                    .map(String::as_str)
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
         )
     })?;
-    let f = entry
-        .payload
-        .downcast_ref::<TaskTermEntry>()
+    let ron = params.map_or("()", |p| p.get_ron());
+    configure_any(entry.payload.as_ref(), ron, cfg)
         .ok_or_else(|| {
             serr(
-            &path,
-            format!("term: \"{name}\""),
-            "a task term (this one is a scene term: use it in the scene's rewards/observations)",
-        )
-        })?;
-    let ron = params.map_or("()", |p| p.get_ron());
-    f.0.configure(ron, cfg)
+                &path,
+                format!("term: \"{name}\""),
+                "a term a task can evaluate (a task term or an engine term)",
+            )
+        })?
         .map_err(|e| serr(&format!("{path}.params"), ron.trim(), e))
 }

@@ -5,6 +5,7 @@ use bevy_ecs::prelude::*;
 use modesuite_engine::components::{DeformableNodes, Object};
 use modesuite_engine::env::{ActionBuffer, ObservationBuffer, StepSignals};
 use modesuite_engine::rng::EnvRng;
+use modesuite_engine::state::PluginStates;
 use modesuite_engine::surface::Surface;
 use modesuite_engine::terms::{check_finite, world_view, ViewQuery};
 use modesuite_engine::{RigidContext, SimClock, SimErrors, SimSettings};
@@ -88,6 +89,7 @@ pub(super) struct TaskWorld<'w, 's> {
     action: Res<'w, ActionBuffer>,
     names: Query<'w, 's, &'static Object>,
     images: Option<Res<'w, CameraImages>>,
+    states: Option<ResMut<'w, PluginStates>>,
 }
 
 impl TaskWorld<'_, '_> {
@@ -106,6 +108,13 @@ impl TaskWorld<'_, '_> {
         };
         let action = &self.action.0[..];
         let world = world_view(&self.view, &self.clock, &self.settings);
+        // Engine terms in the task may write plugin state slots: lent for the evaluation.
+        let states = std::cell::RefCell::new(
+            self.states
+                .as_deref_mut()
+                .map(std::mem::take)
+                .unwrap_or_default(),
+        );
         let r = (|| {
             let robot = robots
                 .get(&task.model.robot)
@@ -146,9 +155,13 @@ impl TaskWorld<'_, '_> {
                 base_height: task.base_height,
                 touching: &touching,
                 images: self.images.as_deref(),
+                states: &states,
             };
             Ok(f(task, &ctx))
         })();
+        if let Some(s) = self.states.as_deref_mut() {
+            *s = states.into_inner();
+        }
         Some(r.map(|v| (v, state)))
     }
 }
