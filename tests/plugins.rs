@@ -527,7 +527,7 @@ fn a_compiled_plugins_terms_work_in_a_task() {
         assert!(!o.terminated && !o.truncated);
     }
     // without the plugin the task names the missing term
-    let mut bare = modesuite::make::default_app();
+    let bare = modesuite::make::default_app();
     let e = bare
         .compile_scene(&desc, &source)
         .err()
