@@ -4,6 +4,7 @@
 use super::{check_positions, Cloth, Region, StretchStats};
 use crate::error::PbdError;
 use crate::material::{ClothMaterial, SolverSettings};
+use modesuite_engine::surface::Surface;
 use nalgebra::Vector3;
 
 impl Cloth {
@@ -173,11 +174,18 @@ impl Cloth {
         }
     }
 
+    /// The cloth's surface (particles and triangles) for the engine's surface measures.
+    pub fn surface(&self) -> Surface<'_> {
+        Surface {
+            nodes: &self.pos,
+            triangles: &self.triangles,
+        }
+    }
+
     /// Fraction of particles whose xy projection lies inside `region` (Uncover: what is still
     /// covered).
     pub fn fraction_above(&self, region: &Region) -> f64 {
-        let k = self.pos.iter().filter(|p| region.contains_xy(p)).count();
-        k as f64 / self.pos.len() as f64
+        self.surface().fraction_inside_xy(region)
     }
 
     /// Area of `region` covered by the cloth's xy projection, m^2 (Cover), estimated on a
@@ -189,49 +197,8 @@ impl Cloth {
 
     /// [`Cloth::covered_area`] counting only the triangles whose three particles are higher
     /// than `above` (m): Cover's gap is covered by cloth spanning it, not by cloth lying on the
-    /// floor under it.
+    /// floor under it ([`Surface::covered_area_above`]).
     pub fn covered_area_above(&self, region: &Region, resolution: usize, above: f64) -> f64 {
-        let r = resolution.max(1);
-        let (x0, y0) = (region.min[0], region.min[1]);
-        let dx = (region.max[0] - x0) / r as f64;
-        let dy = (region.max[1] - y0) / r as f64;
-        if !(dx > 0.0 && dy > 0.0) {
-            return 0.0;
-        }
-        let mut covered = vec![false; r * r];
-        for t in &self.triangles {
-            let [a, b, c] = t.map(|i| self.pos[i as usize]);
-            if !(a.z > above && b.z > above && c.z > above) {
-                continue;
-            }
-            let lo_x = a.x.min(b.x).min(c.x);
-            let hi_x = a.x.max(b.x).max(c.x);
-            let lo_y = a.y.min(b.y).min(c.y);
-            let hi_y = a.y.max(b.y).max(c.y);
-            let i0 = (((lo_x - x0) / dx - 0.5).ceil().max(0.0)) as usize;
-            let i1 = (((hi_x - x0) / dx - 0.5).floor()).min(r as f64 - 1.0);
-            let j0 = (((lo_y - y0) / dy - 0.5).ceil().max(0.0)) as usize;
-            let j1 = (((hi_y - y0) / dy - 0.5).floor()).min(r as f64 - 1.0);
-            if i1 < 0.0 || j1 < 0.0 {
-                continue;
-            }
-            let det = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
-            if det == 0.0 {
-                continue;
-            }
-            for j in j0..=(j1 as usize) {
-                let py = y0 + (j as f64 + 0.5) * dy;
-                for i in i0..=(i1 as usize) {
-                    let px = x0 + (i as f64 + 0.5) * dx;
-                    let u = ((b.x - px) * (c.y - py) - (c.x - px) * (b.y - py)) / det;
-                    let v = ((c.x - px) * (a.y - py) - (a.x - px) * (c.y - py)) / det;
-                    let w = 1.0 - u - v;
-                    if u >= 0.0 && v >= 0.0 && w >= 0.0 {
-                        covered[j * r + i] = true;
-                    }
-                }
-            }
-        }
-        covered.iter().filter(|&&c| c).count() as f64 * dx * dy
+        self.surface().covered_area_above(region, resolution, above)
     }
 }

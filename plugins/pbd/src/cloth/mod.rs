@@ -94,24 +94,7 @@ pub struct StretchStats {
 }
 
 /// An axis-aligned rectangle in the world xy plane (a target region's footprint), m.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Region {
-    /// Smallest x and y, m.
-    pub min: [f64; 2],
-    /// Largest x and y, m.
-    pub max: [f64; 2],
-}
-
-impl Region {
-    /// Area of the rectangle, m^2.
-    pub fn area(&self) -> f64 {
-        (self.max[0] - self.min[0]).max(0.0) * (self.max[1] - self.min[1]).max(0.0)
-    }
-    /// Whether the xy projection of `p` lies inside.
-    pub fn contains_xy(&self, p: &Vector3<f64>) -> bool {
-        p.x >= self.min[0] && p.x <= self.max[0] && p.y >= self.min[1] && p.y <= self.max[1]
-    }
-}
+pub use modesuite_engine::surface::Region;
 
 /// A frame whose pose the caller sets each step; attachments follow it.
 #[derive(Debug, Clone, PartialEq)]
