@@ -102,7 +102,7 @@ pub struct RobotDesc {
     /// [`TrotParams`]' fields; the others keep the robot file's `walking` values. Kept as
     /// written; [`CompiledRobot::gait`] holds the result.
     #[serde(default)]
-    pub gait: Option<ron::Value>,
+    pub gait: Option<Box<ron::value::RawValue>>,
 }
 
 /// A compiled robot: model, spec, modes.
@@ -188,7 +188,7 @@ impl SceneSection for RobotsSection {
                 (Some(g), None) => {
                     return Err(SceneError::semantic(
                         format!("{path}.gait"),
-                        format!("{g:?}"),
+                        g.get_ron(),
                         format!(
                             "no gait field: only legged robots with a walking controller walk (robot `{}` has none)",
                             spec.id
@@ -197,9 +197,9 @@ impl SceneSection for RobotsSection {
                 }
                 (Some(g), Some(walking)) => {
                     let bad = |expected: String| {
-                        SceneError::semantic(format!("{path}.gait"), format!("{g:?}"), expected)
+                        SceneError::semantic(format!("{path}.gait"), g.get_ron(), expected)
                     };
-                    let p = overlay_gait(&walking, g).map_err(bad)?;
+                    let p = overlay_gait(&walking, g.get_ron()).map_err(bad)?;
                     p.check().map_err(bad)?;
                     Some(p)
                 }
@@ -209,9 +209,13 @@ impl SceneSection for RobotsSection {
             } else if modes.discrete {
                 discrete = true;
             }
-            let model = spec
-                .load()
-                .map_err(|e| robot_err(&format!("{path}.model"), e))?;
+            let model = spec.load().map_err(|e| {
+                SceneError::semantic(
+                    format!("{path}.model"),
+                    format!("{:?}", d.model),
+                    e.to_string(),
+                )
+            })?;
             out.push(CompiledRobot {
                 desc: d,
                 spec,
@@ -366,18 +370,25 @@ fn model_spec(
             ),
         ));
     };
-    RobotSpec::from_file(file, &roots).map_err(|e| robot_err(&field, e))
+    RobotSpec::from_file(file, &roots)
+        .map_err(|e| SceneError::semantic(field, value, e.to_string()))
 }
 
-/// The trot parameters `walking` with the fields a scene's `gait` gives in their place; errors
-/// say which field is unknown or of the wrong type.
-fn overlay_gait(walking: &TrotParams, gait: &ron::Value) -> Result<TrotParams, String> {
-    let gait = match gait {
+/// The trot parameters `walking` with the fields a scene's `gait` (RON text) gives in their
+/// place; errors say which field is unknown or of the wrong type.
+fn overlay_gait(walking: &TrotParams, gait: &str) -> Result<TrotParams, String> {
+    let gait: ron::Value = modesuite_engine::scene::ron_options()
+        .from_str(gait)
+        .map_err(|e| e.to_string())?;
+    let gait = match &gait {
         ron::Value::Option(Some(g)) => g.as_ref(),
         g => g,
     };
-    let ron::Value::Map(fields) = gait else {
-        return Err("a struct of trot parameters, e.g. (period: 0.35, kp: 900.0)".into());
+    let fields = match gait {
+        ron::Value::Map(m) => m.clone(),
+        // `gait: ()`: no field replaced
+        ron::Value::Unit => ron::Map::new(),
+        _ => return Err("a struct of trot parameters, e.g. (period: 0.35, kp: 900.0)".into()),
     };
     let text = ron::to_string(walking).map_err(|e| e.to_string())?;
     let mut merged = match ron::from_str::<ron::Value>(&text) {
@@ -458,4 +469,32 @@ fn resolve_modes(
         ee_angular_speed: c.ee_angular_speed,
         leg_scale: c.leg_scale,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scene_gait_replaces_only_the_fields_it_gives() {
+        let walking = TrotParams {
+            period: 0.37,
+            kp: 812.5,
+            ..TrotParams::default()
+        };
+        assert_eq!(overlay_gait(&walking, "()").unwrap(), walking);
+        let p = overlay_gait(&walking, "(kp: 900, max_command: (0.25, 0.5, 1.0))").unwrap();
+        assert_eq!(
+            p,
+            TrotParams {
+                kp: 900.0,
+                max_command: [0.25, 0.5, 1.0],
+                ..walking
+            }
+        );
+        let e = overlay_gait(&walking, "(perod: 0.3)").unwrap_err();
+        assert!(e.contains("perod"), "{e}");
+        let e = overlay_gait(&walking, "0.3").unwrap_err();
+        assert!(e.contains("struct"), "{e}");
+    }
 }
