@@ -77,7 +77,7 @@ pub struct ActionModeLists {
 
 /// PD gains of the joint controller per joint group; joints of a group without an entry (and
 /// joints in no group) take `default`.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GainsDesc {
     /// Gains of every joint without a group entry (default: inertia-scaled, 25 rad/s,
@@ -96,18 +96,6 @@ pub struct GainsDesc {
     /// Gains of the gripper joints.
     #[serde(default)]
     pub gripper: Option<JointGains>,
-}
-
-impl Default for GainsDesc {
-    fn default() -> Self {
-        Self {
-            default: JointGains::default(),
-            base: None,
-            legs: None,
-            arm: None,
-            gripper: None,
-        }
-    }
 }
 
 /// The rapier settings the robot's controllers are validated at when it is alone (its
