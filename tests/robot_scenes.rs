@@ -684,49 +684,41 @@ fn robot_file_errors_name_the_file_and_the_place() {
             "urdf: \"franka_pedestal.urdf\"",
             &format!("urdf: {:?}", urdf.display().to_string()),
         );
-    let write = |name: &str, text: &str| std::fs::write(dir.join(name), text).unwrap();
-    write("ped.robot.ron", &good);
+    std::fs::write(dir.join("ped.robot.ron"), &good).unwrap();
     compile(&dir, "ped.robot.ron", "()").unwrap();
+    // Writes a description file (when given), compiles a scene naming it: the error.
+    let err = |name: &str, text: Option<&str>, actions: &str| {
+        if let Some(t) = text {
+            std::fs::write(dir.join(name), t).unwrap();
+        }
+        let e = compile(&dir, name, actions).unwrap_err();
+        println!("{e}");
+        e
+    };
     // a misspelt field: file:line:col
     let typo = good.replace("ee_frame:", "ee_frme:");
-    write("typo.robot.ron", &typo);
-    let e = compile(&dir, "typo.robot.ron", "()").unwrap_err();
-    println!("{e}");
+    let e = err("typo.robot.ron", Some(&typo), "()");
     let line = typo.lines().position(|l| l.contains("ee_frme")).unwrap() + 1;
     assert!(e.contains(&format!("typo.robot.ron:{line}:")) && e.contains("ee_frme"));
     // a joint the URDF does not have: the field, the value and the valid joints
-    write(
-        "joint.robot.ron",
-        &good.replace("\"panda_joint7\",\n    ]", "\"panda_jont7\",\n    ]"),
-    );
-    let e = compile(&dir, "joint.robot.ron", "()").unwrap_err();
-    println!("{e}");
+    let joint = good.replace("\"panda_joint7\",\n    ]", "\"panda_jont7\",\n    ]");
+    let e = err("joint.robot.ron", Some(&joint), "()");
     assert!(e.contains("arm = \"panda_jont7\"") && e.contains("\"panda_joint7\""));
     // a value out of range
-    write(
-        "volume.robot.ron",
-        &good.replace("finger_volume: (0.015,", "finger_volume: (0.0,"),
-    );
-    let e = compile(&dir, "volume.robot.ron", "()").unwrap_err();
-    println!("{e}");
+    let volume = good.replace("finger_volume: (0.015,", "finger_volume: (0.0,");
+    let e = err("volume.robot.ron", Some(&volume), "()");
     assert!(e.contains("gripper.finger_volume = (0.0, 0.04, 0.02)") && e.contains("> 0"));
     // a base mode the robot does not have
-    let e = compile(&dir, "ped.robot.ron", "(base: Velocity)").unwrap_err();
-    println!("{e}");
+    let e = err("ped.robot.ron", None, "(base: Velocity)");
     assert!(e.contains("actions.base") && e.contains("Velocity") && e.contains(": Off"));
     // no such file
-    let e = compile(&dir, "none.robot.ron", "()").unwrap_err();
-    println!("{e}");
+    let e = err("none.robot.ron", None, "()");
     assert!(e.contains("none.robot.ron") && e.contains("tried"));
     // a file outside the scene's folder and every asset root
     let other = tmp("outside");
     std::fs::write(other.join("x.robot.ron"), &good).unwrap();
-    let rel = format!(
-        "../{}/x.robot.ron",
-        other.file_name().unwrap().to_string_lossy()
-    );
-    let e = compile(&dir, &rel, "()").unwrap_err();
-    println!("{e}");
+    let name = other.file_name().unwrap().to_string_lossy();
+    let e = err(&format!("../{name}/x.robot.ron"), None, "()");
     assert!(e.contains("outside the asset roots"));
 }
 

@@ -253,69 +253,75 @@ impl RobotFile {
     fn check(&self, file: &str) -> Result<(), RobotError> {
         let bad =
             |field: &str, value: String, expected: &str| invalid(file, field, value, expected);
-        if self.id.is_empty() || self.id.contains(['/', '\\']) || self.id.ends_with(".ron") {
-            return Err(bad(
-                "id",
+        let g = &self.gripper;
+        let (hx, hy, hz) = g.finger_volume;
+        let finite_positive = |v: f64| v.is_finite() && v > 0.0;
+        let home = self.home.iter().find(|(_, v)| !v.is_finite());
+        // (valid, field, value, what is valid), the first invalid one reported
+        let fields: [(bool, String, String, &str); 10] = [
+            (
+                !(self.id.is_empty() || self.id.contains(['/', '\\']) || self.id.ends_with(".ron")),
+                "id".into(),
                 format!("{:?}", self.id),
                 "a non-empty name without '/' or '\\' that does not end in .ron",
-            ));
-        }
-        if self.urdf.is_empty() {
-            return Err(bad(
-                "urdf",
+            ),
+            (
+                !self.urdf.is_empty(),
+                "urdf".into(),
                 "\"\"".into(),
                 "a URDF file relative to this file's folder",
-            ));
-        }
-        if !(self.root_height.is_finite() && self.root_height >= 0.0) {
-            return Err(bad(
-                "root_height",
+            ),
+            (
+                self.root_height.is_finite() && self.root_height >= 0.0,
+                "root_height".into(),
                 self.root_height.to_string(),
                 "a finite height >= 0, m",
-            ));
-        }
-        if self.arm.is_empty() {
-            return Err(bad("arm", "[]".into(), "at least one arm joint"));
-        }
-        if self.gripper.joints.is_empty() {
-            return Err(bad(
-                "gripper.joints",
+            ),
+            (
+                !self.arm.is_empty(),
+                "arm".into(),
+                "[]".into(),
+                "at least one arm joint",
+            ),
+            (
+                !g.joints.is_empty(),
+                "gripper.joints".into(),
                 "[]".into(),
                 "at least one gripper joint",
-            ));
-        }
-        let g = &self.gripper;
-        if !(g.open.is_finite() && g.closed.is_finite()) {
-            return Err(bad(
-                "gripper.open / gripper.closed",
+            ),
+            (
+                g.open.is_finite() && g.closed.is_finite(),
+                "gripper.open / gripper.closed".into(),
                 format!("{} / {}", g.open, g.closed),
                 "finite positions",
-            ));
-        }
-        let (hx, hy, hz) = g.finger_volume;
-        if ![hx, hy, hz].iter().all(|v| v.is_finite() && *v > 0.0) {
-            return Err(bad(
-                "gripper.finger_volume",
+            ),
+            (
+                [hx, hy, hz].into_iter().all(finite_positive),
+                "gripper.finger_volume".into(),
                 format!("{:?}", g.finger_volume),
                 "half extents > 0, m",
-            ));
-        }
-        if !(g.grasp_force_limit.is_finite() && g.grasp_force_limit > 0.0) {
-            return Err(bad(
-                "gripper.grasp_force_limit",
+            ),
+            (
+                finite_positive(g.grasp_force_limit),
+                "gripper.grasp_force_limit".into(),
                 g.grasp_force_limit.to_string(),
                 "a finite force > 0, N",
-            ));
-        }
-        if self.ee_frame.is_empty() {
-            return Err(bad("ee_frame", "\"\"".into(), "a link of the URDF"));
-        }
-        if let Some((n, v)) = self.home.iter().find(|(_, v)| !v.is_finite()) {
-            return Err(bad(
-                &format!("home[{n:?}]"),
-                v.to_string(),
+            ),
+            (
+                !self.ee_frame.is_empty(),
+                "ee_frame".into(),
+                "\"\"".into(),
+                "a link of the URDF",
+            ),
+            (
+                home.is_none(),
+                format!("home[{:?}]", home.map_or("", |(n, _)| n.as_str())),
+                home.map_or(String::new(), |(_, v)| v.to_string()),
                 "a finite position",
-            ));
+            ),
+        ];
+        if let Some((_, field, value, expected)) = fields.into_iter().find(|f| !f.0) {
+            return Err(bad(&field, value, expected));
         }
         // A joint in two groups would take two commands.
         let mut seen: BTreeMap<&str, String> = BTreeMap::new();
