@@ -186,21 +186,21 @@ fn robot_base(env: &modesuite_engine::Env) -> Result<nalgebra::Vector3<f64>, Str
 /// travel during the run, to show it moved), `substeps` (physics substeps per step).
 pub fn robots_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
-    for (kind, actions, mode) in [
+    for (id, actions, mode) in [
         (
-            modesuite_robots::RobotKind::Franka,
+            "franka",
             "(base: Velocity, arm: JointDelta)",
             "velocity+joint_delta",
         ),
         (
-            modesuite_robots::RobotKind::Spot,
+            "spot",
             "(base: Locomotion, arm: JointDelta)",
             "locomotion+joint_delta",
         ),
     ] {
         // the robot's substeps and Gauss-Seidel sweeps, as its scenes have them
-        let spec = modesuite_robots::RobotSpec::of(kind);
-        let (case, sub, pgs) = (spec.id, spec.substeps, spec.pgs_iterations);
+        let spec = modesuite_robots::RobotSpec::builtin(id).map_err(|e| e.to_string())?;
+        let (case, sub, pgs) = (spec.id.as_str(), spec.substeps, spec.pgs_iterations);
         let text = format!(
             r#"Scene(
     physics: (dt: 0.016666666666666666, substeps: {sub}, rigid_iterations: 1, rigid_pgs_iterations: {pgs}),

@@ -1,10 +1,14 @@
-//! Robots in scene files: the `robots` section, action modes, discrete keys, scripts, resets.
+//! Robots in scene files: the `robots` section, action modes, discrete keys, scripts, resets,
+//! and robots as data (description files, a robot added with files only).
 
 mod common;
 
+use std::path::{Path, PathBuf};
+
 use modesuite::engine::scene::SceneSource;
 use modesuite::engine::{Env, RigidContext, Space};
-use modesuite::robots::{DiscreteKey, Robots};
+use modesuite::make::{make, MakeOptions};
+use modesuite::robots::{DiscreteKey, RobotFile, RobotObservation, RobotSpec, Robots};
 use nalgebra::Vector3;
 
 fn franka_scene(actions: &str) -> String {
@@ -527,4 +531,214 @@ fn an_absolute_ee_target_from_a_rotation_vector_holds_the_hand() {
         "hand drift after 1 s of the absolute target it started at: {drift:.4} m (tolerance 0.01)"
     );
     assert!(drift < 0.01);
+}
+
+// Robots as data: robot description files (`*.robot.ron`). The built-in robots are their
+// files; a third robot, the Franka on a fixed pedestal, is added with files only (its URDF from
+// assets/robots/generate_models.py, its description file, a scene with a task) and runs a task
+// episode; a description file's errors name the file and the place.
+
+const PEDESTAL_SCENE: &str = "scenes/examples/franka_pedestal.scene.ron";
+const PEDESTAL_FILE: &str = "assets/robots/franka_pedestal/franka_pedestal.robot.ron";
+
+/// Largest distance of an arm joint from its home position after 200 zero-action steps, rad.
+/// The PD motors hold their home targets with gravity compensation of the arm's own links; the
+/// foam rod held in the hand (0.24 kg, its centre about 0.4 m ahead of the hand) is not
+/// compensated, and the wrist (joint 6, whose inertia-scaled gain is small) gives way by about
+/// 0.03 rad under it.
+const HOME_TOL: f64 = 0.05;
+
+/// How far the pedestal (the fixed root) may move, m and rad: not at all.
+const BASE_TOL: f64 = 1e-9;
+
+fn observe(env: &Env) -> RobotObservation {
+    let robots = env.app.world.resource::<Robots>();
+    let ctx = env.app.world.resource::<RigidContext>();
+    robots.robots[0].observe(ctx).unwrap()
+}
+
+fn pedestal_file() -> RobotFile {
+    let text = std::fs::read_to_string(common::root().join(PEDESTAL_FILE)).unwrap();
+    RobotFile::parse(&text, PEDESTAL_FILE).unwrap()
+}
+
+#[test]
+fn a_pedestal_franka_from_files_only_runs_a_task_episode() {
+    let path = common::root().join(PEDESTAL_SCENE);
+    let mut env = make(path.to_str().unwrap(), &MakeOptions::default()).unwrap();
+    env.autoreset = false;
+    env.reset(Some(0));
+    let n = env.spaces().action.flat_dim();
+    assert_eq!(n, 6, "EePoseDelta only: no base and no gripper action");
+    let start = observe(&env);
+    let mut ret = 0.0;
+    for _ in 0..200 {
+        let out = env.step(&vec![0.0; n]);
+        assert!(out.info.error.is_none(), "{:?}", out.info.error);
+        assert!(out.reward.is_finite());
+        ret += out.reward;
+    }
+    let end = observe(&env);
+    let file = pedestal_file();
+    let robots = env.app.world.resource::<Robots>();
+    let fixed = &robots.robots[0].fixed;
+    assert_eq!(fixed.model, "franka_pedestal");
+    let mut worst = (0.0f64, String::new());
+    for &j in &fixed.arm {
+        let name = &fixed.robot.joints[j].name;
+        let home = file.home.get(name).copied().unwrap_or(0.0);
+        let err = (end.q[j] - home).abs();
+        if err > worst.0 {
+            worst = (err, name.clone());
+        }
+    }
+    println!(
+        "pedestal Franka, 200 zero-action steps (return {ret:.2}): arm max |q - q_home| = {:.4} rad ({}) (tol {HOME_TOL})",
+        worst.0, worst.1
+    );
+    assert!(worst.0 <= HOME_TOL);
+    let moved = (end.base.translation.vector - start.base.translation.vector).norm();
+    let turned = end.base.rotation.angle_to(&start.base.rotation);
+    println!("pedestal base: moved {moved:.2e} m, turned {turned:.2e} rad (tol {BASE_TOL})");
+    assert!(moved <= BASE_TOL && turned <= BASE_TOL);
+}
+
+#[test]
+fn the_cli_runs_the_pedestal_task_and_lists_the_built_in_robots() {
+    let out = common::stdout_ok(common::modesuite_cmd().args([
+        "run",
+        PEDESTAL_SCENE,
+        "--steps",
+        "200",
+        "--json",
+    ]));
+    println!("{out}");
+    let summary = out.lines().last().unwrap();
+    assert!(summary.contains("\"errors\":0") && summary.contains("\"mean_length\":200.0"));
+    let out = common::stdout_ok(common::modesuite_cmd().args(["list", "robots"]));
+    println!("{out}");
+    for (b, spec) in RobotSpec::builtins().into_iter().enumerate() {
+        let spec = spec.unwrap_or_else(|e| panic!("built-in {b}: {e}"));
+        assert!(out.contains(&spec.id) && out.contains(&spec.description));
+    }
+}
+
+#[test]
+fn the_built_in_robots_are_their_description_files() {
+    let app = modesuite::make::default_app();
+    for id in ["franka", "spot"] {
+        let entry = &app.registry().robots[id];
+        let spec = entry.payload.downcast_ref::<RobotSpec>().unwrap();
+        let text = std::fs::read_to_string(&spec.file).unwrap();
+        let file = RobotFile::parse(&text, &spec.file.display().to_string()).unwrap();
+        assert_eq!(file.id, id);
+        assert_eq!(entry.description, file.description);
+        assert_eq!(spec.arm_joints, file.arm);
+        assert_eq!(spec.leg_joints, file.legs);
+        assert_eq!(spec.legged(), id == "spot");
+        let urdf = spec.file.parent().unwrap().join(&file.urdf);
+        assert_eq!(
+            std::fs::read_to_string(urdf).unwrap(),
+            *spec.urdf_text,
+            "{id}: the built-in URDF is the file's"
+        );
+    }
+}
+
+/// A folder of its own under the temporary directory.
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "modesuite-robot-files-{}-{name}",
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Compiles a one-robot scene written into `dir`; the error's text when it fails.
+fn compile(dir: &Path, model: &str, actions: &str) -> Result<(), String> {
+    let scene = dir.join("robot.scene.ron");
+    std::fs::write(
+        &scene,
+        format!(
+            r#"Scene(objects: [(name: "ground", shape: Plane(size: (4.0, 4.0)), body: Static)],
+    extensions: {{ "robots": [(name: "r", model: "{model}", actions: {actions})] }})"#
+        ),
+    )
+    .unwrap();
+    let (desc, source) = modesuite::engine::scene::load_file(&scene).map_err(|e| e.to_string())?;
+    let app = modesuite::make::default_app();
+    app.compile_scene(&desc, &source)
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+}
+
+#[test]
+fn robot_file_errors_name_the_file_and_the_place() {
+    let dir = tmp("errors");
+    // The pedestal's file copied next to a scene elsewhere, its URDF named by absolute path.
+    let urdf = common::root().join("assets/robots/franka_pedestal/franka_pedestal.urdf");
+    let good = std::fs::read_to_string(common::root().join(PEDESTAL_FILE))
+        .unwrap()
+        .replace(
+            "urdf: \"franka_pedestal.urdf\"",
+            &format!("urdf: {:?}", urdf.display().to_string()),
+        );
+    std::fs::write(dir.join("ped.robot.ron"), &good).unwrap();
+    compile(&dir, "ped.robot.ron", "()").unwrap();
+    // Writes a description file (when given), compiles a scene naming it: the error.
+    let err = |name: &str, text: Option<&str>, actions: &str| {
+        if let Some(t) = text {
+            std::fs::write(dir.join(name), t).unwrap();
+        }
+        let e = compile(&dir, name, actions).unwrap_err();
+        println!("{e}");
+        e
+    };
+    // a misspelt field: file:line:col
+    let typo = good.replace("ee_frame:", "ee_frme:");
+    let e = err("typo.robot.ron", Some(&typo), "()");
+    let line = typo.lines().position(|l| l.contains("ee_frme")).unwrap() + 1;
+    assert!(e.contains(&format!("typo.robot.ron:{line}:")) && e.contains("ee_frme"));
+    // a joint the URDF does not have: the field, the value and the valid joints
+    let joint = good.replace("\"panda_joint7\",\n    ]", "\"panda_jont7\",\n    ]");
+    let e = err("joint.robot.ron", Some(&joint), "()");
+    assert!(e.contains("arm = \"panda_jont7\"") && e.contains("\"panda_joint7\""));
+    // a value out of range
+    let volume = good.replace("finger_volume: (0.015,", "finger_volume: (0.0,");
+    let e = err("volume.robot.ron", Some(&volume), "()");
+    assert!(e.contains("gripper.finger_volume = (0.0, 0.04, 0.02)") && e.contains("> 0"));
+    // a base mode the robot does not have
+    let e = err("ped.robot.ron", None, "(base: Velocity)");
+    assert!(e.contains("actions.base") && e.contains("Velocity") && e.contains(": Off"));
+    // no such file
+    let e = err("none.robot.ron", None, "()");
+    assert!(e.contains("none.robot.ron") && e.contains("tried"));
+    // a file outside the scene's folder and every asset root
+    let other = tmp("outside");
+    std::fs::write(other.join("x.robot.ron"), &good).unwrap();
+    let name = other.file_name().unwrap().to_string_lossy();
+    let e = err(&format!("../{name}/x.robot.ron"), None, "()");
+    assert!(e.contains("outside the asset roots"));
+}
+
+#[test]
+fn the_documented_franka_file_is_the_built_in_one() {
+    // docs/robots.md shows the Franka's file without its comments
+    let doc = std::fs::read_to_string(common::root().join("docs/robots.md")).unwrap();
+    let block = doc
+        .split("```ron\n")
+        .nth(1)
+        .and_then(|b| b.split("```").next())
+        .unwrap();
+    let file = std::fs::read_to_string(
+        common::root().join("assets/robots/franka_ridgeback/franka.robot.ron"),
+    )
+    .unwrap();
+    let code: String = file
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert_eq!(block, code);
 }

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Writes franka_ridgeback/franka_ridgeback.urdf and spot_arm/spot_arm.urdf.
+"""Writes franka_ridgeback/franka_ridgeback.urdf, franka_pedestal/franka_pedestal.urdf and
+spot_arm/spot_arm.urdf.
 
 The models are this project's own: primitive geometry (box, cylinder, sphere), kinematics, limits
 and masses from the manufacturers' public figures (see README.md for every number's source).
@@ -105,31 +106,9 @@ def sph(r):
     return f'<sphere radius="{f(r)}"/>'
 
 
-def franka_ridgeback():
-    u = Urdf("franka_ridgeback",
-             "Franka Panda on a Clearpath Ridgeback, primitive geometry; written by modesuite "
-             "(assets/robots/generate_models.py), numbers and sources in assets/robots/README.md")
-    # Virtual holonomic base: world -> x -> y -> yaw. Virtual links are massless frames.
-    u.link("world")
-    u.link("base_x_link")
-    u.link("base_y_link")
-    # Ridgeback max velocity 1.1 m/s, 2.0 rad/s (ridgeback_control control.yaml). Efforts: chassis +
-    # arm (about 155 kg) at the 2.5 m/s^2 acceleration limit of control.yaml gives about 400 N.
-    u.joint("base_x", "prismatic", "world", "base_x_link", axis=(1, 0, 0),
-            limit=(-50, 50, 400, 1.1), damping=0)
-    u.joint("base_y", "prismatic", "base_x_link", "base_y_link", axis=(0, 1, 0),
-            limit=(-50, 50, 400, 1.1), damping=0)
-    # Yaw: about 25 kg m^2 about z (chassis box + arm); 100 N m gives 4 rad/s^2.
-    u.joint("base_yaw", "continuous", "base_y_link", "base_link", axis=(0, 0, 1),
-            limit=(None, None, 100, 2.0), damping=0)
-    # Chassis: 0.96 x 0.79 x 0.30 m, 135 kg (Clearpath published figures); top plate (mid_mount)
-    # at z 0.3059 above the floor as in the ridgeback description.
-    top = 0.3059
-    sx, sy, sz = 0.96, 0.79, 0.30
-    u.link("base_link", (135.0, (0, 0, top - sz / 2), box_inertia(135.0, sx, sy, sz), None),
-           [(box((sx, sy, sz)), (0, 0, top - sz / 2), (0, 0, 0))], rgba=(0.15, 0.15, 0.15, 1))
-    u.link("arm_mount")
-    u.joint("arm_mount_joint", "fixed", "base_link", "arm_mount", xyz=(0.21, 0, top))
+def franka_arm(u, mount):
+    """The Franka Panda arm with its hand (panda_link0 .. panda_link7, hand, TCP, two fingers),
+    panda_link0 fixed to the link `mount`."""
     # Franka arm: link0 .. link7 with the inertial parameters of franka_description
     # (example-robot-data 6.0.0 panda_description), modified-DH kinematics of the Franka docs.
     inertials = {
@@ -155,7 +134,7 @@ def franka_ridgeback():
     }
     u.link("panda_link0", (inertials["panda_link0"][0], inertials["panda_link0"][1], None, inertials["panda_link0"][2]),
            shapes["panda_link0"], rgba=(0.9, 0.9, 0.9, 1))
-    u.joint("panda_mount", "fixed", "arm_mount", "panda_link0")
+    u.joint("panda_mount", "fixed", mount, "panda_link0")
     # (name, xyz, rpy, lower, upper, effort, velocity) -- Franka datasheet limits.
     joints = [
         ("panda_joint1", (0, 0, 0.333), (0, 0, 0), -2.8973, 2.8973, 87, 2.175),
@@ -188,7 +167,50 @@ def franka_ridgeback():
             axis=(0, 1, 0), limit=(0, 0.04, 100, 0.2), damping=0.3)
     u.joint("panda_finger_joint2", "prismatic", "panda_hand", "panda_rightfinger", xyz=(0, 0, 0.0584),
             axis=(0, -1, 0), limit=(0, 0.04, 100, 0.2), damping=0.3, mimic=("panda_finger_joint1", 1.0))
+
+
+def franka_ridgeback():
+    u = Urdf("franka_ridgeback",
+             "Franka Panda on a Clearpath Ridgeback, primitive geometry; written by modesuite "
+             "(assets/robots/generate_models.py), numbers and sources in assets/robots/README.md")
+    # Virtual holonomic base: world -> x -> y -> yaw. Virtual links are massless frames.
+    u.link("world")
+    u.link("base_x_link")
+    u.link("base_y_link")
+    # Ridgeback max velocity 1.1 m/s, 2.0 rad/s (ridgeback_control control.yaml). Efforts: chassis +
+    # arm (about 155 kg) at the 2.5 m/s^2 acceleration limit of control.yaml gives about 400 N.
+    u.joint("base_x", "prismatic", "world", "base_x_link", axis=(1, 0, 0),
+            limit=(-50, 50, 400, 1.1), damping=0)
+    u.joint("base_y", "prismatic", "base_x_link", "base_y_link", axis=(0, 1, 0),
+            limit=(-50, 50, 400, 1.1), damping=0)
+    # Yaw: about 25 kg m^2 about z (chassis box + arm); 100 N m gives 4 rad/s^2.
+    u.joint("base_yaw", "continuous", "base_y_link", "base_link", axis=(0, 0, 1),
+            limit=(None, None, 100, 2.0), damping=0)
+    # Chassis: 0.96 x 0.79 x 0.30 m, 135 kg (Clearpath published figures); top plate (mid_mount)
+    # at z 0.3059 above the floor as in the ridgeback description.
+    top = 0.3059
+    sx, sy, sz = 0.96, 0.79, 0.30
+    u.link("base_link", (135.0, (0, 0, top - sz / 2), box_inertia(135.0, sx, sy, sz), None),
+           [(box((sx, sy, sz)), (0, 0, top - sz / 2), (0, 0, 0))], rgba=(0.15, 0.15, 0.15, 1))
+    u.link("arm_mount")
+    u.joint("arm_mount_joint", "fixed", "base_link", "arm_mount", xyz=(0.21, 0, top))
+    franka_arm(u, "arm_mount")
     u.write("franka_ridgeback/franka_ridgeback.urdf")
+
+
+def franka_pedestal():
+    u = Urdf("franka_pedestal",
+             "Franka Panda on a fixed pedestal, primitive geometry; written by modesuite "
+             "(assets/robots/generate_models.py), numbers and sources in assets/robots/README.md")
+    # Pedestal: a 0.3 x 0.3 x 0.5 m steel column, 40 kg (chosen here), the URDF's root: it is
+    # fixed to the world at the spawn pose, so nothing moves it. The arm stands on its top.
+    h = 0.5
+    u.link("pedestal", (40.0, (0, 0, h / 2), box_inertia(40.0, 0.3, 0.3, h), None),
+           [(box((0.3, 0.3, h)), (0, 0, h / 2), (0, 0, 0))], rgba=(0.3, 0.3, 0.32, 1))
+    u.link("arm_mount")
+    u.joint("arm_mount_joint", "fixed", "pedestal", "arm_mount", xyz=(0, 0, h))
+    franka_arm(u, "arm_mount")
+    u.write("franka_pedestal/franka_pedestal.urdf")
 
 
 def spot_arm():
@@ -258,4 +280,5 @@ def spot_arm():
 if __name__ == "__main__":
     os.chdir(os.path.dirname(os.path.abspath(__file__)))
     franka_ridgeback()
+    franka_pedestal()
     spot_arm()

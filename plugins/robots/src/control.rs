@@ -34,6 +34,7 @@ pub enum JointCommand {
 /// PD gains of one joint's motor (rapier's implicit force-based motor, limited to the joint's
 /// effort minus the gravity feed-forward).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum JointGains {
     /// Gains scaled by the joint-space inertia `M_kk` of the joint at the current configuration
     /// (the inertia it moves with every other joint held): `kp = omega^2 M_kk`,

@@ -69,6 +69,30 @@ pub enum RobotError {
         /// What is wrong.
         message: String,
     },
+    /// A robot description file (`*.robot.ron`) is not valid RON or has an unknown field.
+    #[error("{file}:{line}:{col}: {message}")]
+    DescriptionSyntax {
+        /// The description file.
+        file: String,
+        /// Line (1-based).
+        line: usize,
+        /// Column (1-based).
+        col: usize,
+        /// The parser's message.
+        message: String,
+    },
+    /// A field of a robot description file has a value that is not valid.
+    #[error("{file}: {field} = {value}: expected {expected}")]
+    Description {
+        /// The description file.
+        file: String,
+        /// The field (`arm[3]`, `gripper.open`, ...).
+        field: String,
+        /// The value as written.
+        value: String,
+        /// What is valid.
+        expected: String,
+    },
     /// A name given by the caller (joint, frame, home pose entry) does not exist in the robot.
     #[error("robot `{robot}`: unknown {what} `{name}`")]
     UnknownName {

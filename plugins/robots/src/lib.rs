@@ -11,7 +11,10 @@
 //! - [`control`]: [`JointController`] (position/velocity motors + gravity feed-forward),
 //!   [`HolonomicBase`].
 //! - [`ik`]: [`solve_ik`], [`forward_kinematics`].
-//! - [`models`]: [`RobotSpec`] of `franka` and `spot` (files, joint groups, home poses).
+//! - [`description`]: robot description files (`*.robot.ron`, [`RobotFile`]) and the robots
+//!   built into the binary (`franka`, `spot`).
+//! - [`models`]: [`RobotSpec`], a robot model built from its description file (URDF text, joint
+//!   groups, home pose, gains, action modes).
 //!
 //! - [`actions`]: action modes (base, arm, gripper, 14 discrete keys).
 //! - [`plugin`]: [`RobotsPlugin`]: the `robots` scene section, per-env controllers ([`Robots`]),
@@ -21,6 +24,7 @@
 
 pub mod actions;
 pub mod control;
+pub mod description;
 pub mod error;
 pub mod ik;
 pub mod locomotion;
@@ -31,10 +35,11 @@ pub mod urdf;
 
 pub use actions::{ActionConfig, ActionModes, ArmMode, BaseMode, DiscreteKey, GripperMode};
 pub use control::{BaseVelocity, HolonomicBase, JointCommand, JointController, JointGains};
+pub use description::RobotFile;
 pub use error::RobotError;
 pub use ik::{forward_kinematics, solve_ik, IkOptions, IkSolution};
 pub use locomotion::{FootState, LegKinematics, LegTargets, TrotController, TrotParams};
-pub use models::{RobotKind, RobotSpec};
+pub use models::RobotSpec;
 pub use plugin::{RobotObservation, RobotRuntime, Robots, RobotsPlugin};
 pub use robot::{spawn_robot, Robot, RobotBody, RobotFrame, RobotJoint, RootMount, SpawnOptions};
 pub use urdf::{read_urdf, AssetPaths, UrdfModel};

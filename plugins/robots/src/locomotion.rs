@@ -445,9 +445,9 @@ impl TrotController {
         let mut joints = [[0usize; 3]; NUM_LEGS];
         for l in 0..NUM_LEGS {
             let names = [
-                spec.leg_joints[3 * l],
-                spec.leg_joints[3 * l + 1],
-                spec.leg_joints[3 * l + 2],
+                spec.leg_joints[3 * l].as_str(),
+                spec.leg_joints[3 * l + 1].as_str(),
+                spec.leg_joints[3 * l + 2].as_str(),
             ];
             legs[l] = Some(LegKinematics::from_model(model, names)?);
             for k in 0..3 {

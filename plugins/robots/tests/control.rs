@@ -6,7 +6,7 @@ mod common;
 use modesuite_engine::deps::nalgebra::{Isometry3, Vector3};
 use modesuite_engine::deps::rapier3d::prelude::{ColliderBuilder, RigidBodyBuilder};
 use modesuite_engine::math::vec_to_rapier;
-use modesuite_robots::{BaseVelocity, HolonomicBase, JointController, RobotKind};
+use modesuite_robots::{BaseVelocity, HolonomicBase, JointController};
 
 /// Steps the Franka arm from home to home + `delta` on every arm joint and returns, per joint,
 /// (error at 1 s, overshoot fraction, settling time into 0.01 rad in s).
@@ -16,8 +16,8 @@ fn franka_step_response(
     delta: f64,
     substeps_per_apply: usize,
 ) -> Vec<(String, f64, f64, f64)> {
-    let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
-    let arm = spec.indices(&robot, spec.arm_joints).unwrap();
+    let (mut ctx, spec, robot) = common::spawn("franka");
+    let arm = spec.indices(&robot, &spec.arm_joints).unwrap();
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
     ctl.gravity_compensation = gravity_compensation;
     // Settle for 0.5 s at home.
@@ -79,7 +79,7 @@ fn worst(rows: &[(String, f64, f64, f64)]) -> (f64, f64, f64) {
 #[test]
 fn franka_pd_tracking_with_gravity_compensation() {
     let delta = 0.3;
-    let dt = common::dt(RobotKind::Franka);
+    let dt = common::dt("franka");
     let with = franka_step_response(dt, true, delta, 1);
     let without = franka_step_response(dt, false, delta, 1);
     println!(
@@ -120,10 +120,10 @@ fn franka_pd_tracking_with_gravity_compensation() {
 
 #[test]
 fn franka_holonomic_base_tracks_velocity() {
-    let dt = common::dt(RobotKind::Franka);
-    let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
-    let [x, y, yaw] = spec.base_joints.unwrap();
-    let base = HolonomicBase::new(&robot, x, y, yaw).unwrap();
+    let dt = common::dt("franka");
+    let (mut ctx, spec, robot) = common::spawn("franka");
+    let [x, y, yaw] = spec.base_joints.clone().unwrap();
+    let base = HolonomicBase::new(&robot, &x, &y, &yaw).unwrap();
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
     let cmds = [
         BaseVelocity {
@@ -177,7 +177,7 @@ fn franka_holonomic_base_tracks_velocity() {
     }
     assert!(worst <= 0.05, "base velocity error {worst}");
     // The arm kept its pose while the base moved.
-    let arm = spec.indices(&robot, spec.arm_joints).unwrap();
+    let arm = spec.indices(&robot, &spec.arm_joints).unwrap();
     let q = robot.joint_positions(&ctx).unwrap();
     let mut arm_err = 0.0f64;
     for &i in &arm {
@@ -191,8 +191,8 @@ fn franka_holonomic_base_tracks_velocity() {
 
 #[test]
 fn spot_stands_on_its_legs() {
-    let dt = common::dt(RobotKind::Spot);
-    let (mut ctx, spec, robot) = common::spawn(RobotKind::Spot);
+    let dt = common::dt("spot");
+    let (mut ctx, spec, robot) = common::spawn("spot");
     // Floor: a fixed box whose top is z = 0.
     let floor = ctx.bodies.insert(
         RigidBodyBuilder::fixed().translation(vec_to_rapier(&Vector3::new(0.0, 0.0, -0.5))),
@@ -226,10 +226,10 @@ fn spot_stands_on_its_legs() {
 
 #[test]
 fn franka_gripper_mimic_fingers_close_together() {
-    let dt = common::dt(RobotKind::Franka);
-    let (mut ctx, spec, robot) = common::spawn(RobotKind::Franka);
-    let f1 = robot.joint_index(spec.gripper_joints[0]).unwrap();
-    let f2 = robot.joint_index(spec.gripper_joints[1]).unwrap();
+    let dt = common::dt("franka");
+    let (mut ctx, spec, robot) = common::spawn("franka");
+    let f1 = robot.joint_index(&spec.gripper_joints[0]).unwrap();
+    let f2 = robot.joint_index(&spec.gripper_joints[1]).unwrap();
     let mut ctl = JointController::hold_current(&robot, &ctx).unwrap();
     // Only the leading finger is commanded; the mimic finger follows it.
     ctl.set_position(&robot, f1, spec.gripper_open_closed.1)

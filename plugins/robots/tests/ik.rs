@@ -6,12 +6,12 @@ mod common;
 use std::time::Instant;
 
 use modesuite_engine::rng::EnvRng;
-use modesuite_robots::{forward_kinematics, solve_ik, IkOptions, RobotKind};
+use modesuite_robots::{forward_kinematics, solve_ik, IkOptions};
 
-fn ik_accuracy(kind: RobotKind, spread: f64, seed: u64) -> f64 {
+fn ik_accuracy(kind: &str, spread: f64, seed: u64) -> f64 {
     let (ctx, spec, robot) = common::spawn(kind);
-    let arm = spec.indices(&robot, spec.arm_joints).unwrap();
-    let ee = robot.frame_index(spec.ee_frame).unwrap();
+    let arm = spec.indices(&robot, &spec.arm_joints).unwrap();
+    let ee = robot.frame_index(&spec.ee_frame).unwrap();
     let home = robot.joint_positions(&ctx).unwrap();
     let mut rng = EnvRng::from_seed(seed);
     let trials = 200;
@@ -62,12 +62,12 @@ fn ik_accuracy(kind: RobotKind, spread: f64, seed: u64) -> f64 {
 
 #[test]
 fn franka_ik_reaches_random_targets() {
-    let rate = ik_accuracy(RobotKind::Franka, 1.0, 7);
+    let rate = ik_accuracy("franka", 1.0, 7);
     assert!(rate >= 0.95, "success rate {rate}");
 }
 
 #[test]
 fn spot_arm_ik_reaches_random_targets() {
-    let rate = ik_accuracy(RobotKind::Spot, 1.0, 11);
+    let rate = ik_accuracy("spot", 1.0, 11);
     assert!(rate >= 0.95, "success rate {rate}");
 }

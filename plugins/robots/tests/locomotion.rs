@@ -11,7 +11,7 @@ use modesuite_engine::math::vec_to_rapier;
 use modesuite_engine::rng::EnvRng;
 use modesuite_engine::RigidContext;
 use modesuite_robots::{
-    BaseVelocity, JointController, Robot, RobotKind, RobotSpec, TrotController, TrotParams,
+    BaseVelocity, JointController, Robot, RobotSpec, TrotController, TrotParams,
 };
 
 /// Control period: 60 Hz.
@@ -29,7 +29,7 @@ impl Rapier {
     /// Spot alone (`RobotSpec::substeps`, `RobotSpec::pgs_iterations`: 1 substep of 1/60 s, 24
     /// sweeps): robot-only scenes and `bench robots`.
     fn alone() -> Self {
-        let spec = RobotSpec::of(RobotKind::Spot);
+        let spec = common::spec("spot");
         Self {
             substeps: spec.substeps as usize,
             pgs: spec.pgs_iterations,
@@ -94,7 +94,7 @@ fn euler(pose: &Isometry3<f64>) -> (f64, f64, f64) {
 
 impl Walker {
     fn new(params: TrotParams, rapier: Rapier) -> Self {
-        let (spec, model) = common::model(RobotKind::Spot);
+        let (spec, model) = common::model("spot");
         let mut ctx = common::rapier_context(rapier.pgs);
         let robot = spec
             .spawn(&mut ctx, &model, Isometry3::identity())
@@ -244,7 +244,7 @@ fn walk_constant(
 
 #[test]
 fn leg_kinematics_match_the_simulated_robot() {
-    let (spec, model) = common::model(RobotKind::Spot);
+    let (spec, model) = common::model("spot");
     let mut ctx = RigidContext::new();
     let robot = spec.spawn(&mut ctx, &model, Isometry3::identity()).unwrap();
     let trot = TrotController::new(&robot, &model, &spec, TrotParams::default()).unwrap();
@@ -264,7 +264,7 @@ fn leg_kinematics_match_the_simulated_robot() {
                 let (lo, hi) = (kin.lower[k] + 0.05, kin.upper[k] - 0.05);
                 let v = rng.range(lo, hi);
                 *slot = v;
-                let name = spec.leg_joints[3 * l + k];
+                let name = spec.leg_joints[3 * l + k].as_str();
                 q[robot.joint_index(name).unwrap()] = v;
             }
         }
@@ -464,10 +464,10 @@ fn random_commands(
 ) -> RandomRun {
     let mut w = Walker::new(TrotParams::default(), rapier);
     let mut rng = EnvRng::from_seed(seed);
-    let arm = w.spec.indices(&w.robot, w.spec.arm_joints).unwrap();
+    let arm = w.spec.indices(&w.robot, &w.spec.arm_joints).unwrap();
     let q0 = w.robot.joint_positions(&w.ctx).unwrap();
     let home: [f64; 6] = std::array::from_fn(|k| q0[arm[k]]);
-    let tool = w.robot.frame_index(w.spec.ee_frame).unwrap();
+    let tool = w.robot.frame_index(&w.spec.ee_frame).unwrap();
     let gripper = w.robot.bodies[w.robot.frames[tool].body].handle;
     let mut worst = Worst::new();
     let n = (seconds / CONTROL_DT).round() as usize;

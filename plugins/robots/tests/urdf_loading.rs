@@ -9,12 +9,12 @@ use modesuite_engine::deps::nalgebra::Isometry3;
 use modesuite_engine::RigidContext;
 use modesuite_robots::urdf::{parse_urdf, JointKind};
 use modesuite_robots::{
-    forward_kinematics, spawn_robot, AssetPaths, RobotError, RobotKind, RootMount, SpawnOptions,
+    forward_kinematics, spawn_robot, AssetPaths, RobotError, RootMount, SpawnOptions,
 };
 
 #[test]
 fn franka_ridgeback_structure_and_kinematics() {
-    let (spec, model) = common::model(RobotKind::Franka);
+    let (spec, model) = common::model("franka");
     let actuated: Vec<_> = model
         .joints
         .iter()
@@ -58,7 +58,7 @@ fn franka_ridgeback_structure_and_kinematics() {
     // 0.21 mount offset + a7 0.088; 0.3059 mount height + 0.333 + 0.316 + 0.384 - 0.107 - 0.1034).
     let mut ctx = RigidContext::new();
     let robot = spec.spawn(&mut ctx, &model, Isometry3::identity()).unwrap();
-    let tcp = robot.frame_index(spec.ee_frame).unwrap();
+    let tcp = robot.frame_index(&spec.ee_frame).unwrap();
     let zeros = vec![0.0; robot.num_joints()];
     let p = forward_kinematics(&robot, &ctx, tcp, &zeros)
         .unwrap()
@@ -83,7 +83,7 @@ fn franka_ridgeback_structure_and_kinematics() {
 
 #[test]
 fn spot_structure_and_standing_height() {
-    let (spec, model) = common::model(RobotKind::Spot);
+    let (spec, model) = common::model("spot");
     let actuated = model.joints.iter().filter(|j| j.kind.is_actuated()).count();
     println!(
         "spot: {} links, {} joints ({actuated} actuated), total mass {:.2} kg (BD: 32.5 kg + 8 kg arm)",

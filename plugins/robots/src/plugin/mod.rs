@@ -9,7 +9,9 @@
 //!     ],
 //! }
 //! ```
-//! `model` is a registered robot (`franka`, `spot`, or one a plugin registers). Each env spawns
+//! `model` is a registered robot (`franka`, `spot`, or one a plugin registers: a [`RobotSpec`]
+//! payload) or the path of a robot description file (`*.robot.ron`, relative to the scene's
+//! folder; see [`crate::description`]). Each env spawns
 //! the robot as a rapier multibody, one entity per rapier body (`"robot/panda_link3"`, kind
 //! `robot.link`, so `--dump-state` lists link poses and deformables can touch the links), and a
 //! root entity (`"robot"`, kind `robot`) with the [`JointState`]. Per env, the [`Robots`]
@@ -41,17 +43,19 @@ use modesuite_engine::{
     EnvSystems, PhysicsSystems, Plugin, RigidSystems, SimApp, Substep, SubstepSystems,
 };
 
-use crate::models::{RobotKind, RobotSpec};
+use crate::description::BUILTIN;
+use crate::models::RobotSpec;
 
 pub use runtime::{RobotFixed, RobotObservation, RobotRuntime, Robots};
 pub use section::{
-    CompiledRobot, RobotDesc, RobotsSection, Script, ScriptBase, ScriptEe, ScriptGripper,
+    BrokenRobot, CompiledRobot, RobotDesc, RobotsSection, Script, ScriptBase, ScriptEe,
+    ScriptGripper,
 };
 pub use systems::BASE_LIMITS;
 use systems::{robot_actions, robot_control, robot_writeback};
 
-/// Registers the robots (`franka`, `spot`), the `robots` scene section and the controller
-/// systems.
+/// Registers the robots built into the binary (`franka`, `spot`, each a [`RobotSpec`] from its
+/// description file, by id), the `robots` scene section and the controller systems.
 pub struct RobotsPlugin;
 
 impl Plugin for RobotsPlugin {
@@ -60,18 +64,23 @@ impl Plugin for RobotsPlugin {
     }
 
     fn build(&self, app: &mut SimApp) {
-        for kind in [RobotKind::Franka, RobotKind::Spot] {
-            let spec = RobotSpec::of(kind);
-            app.register_robot(RobotEntry {
-                name: spec.id.to_string(),
-                description: match kind {
-                    RobotKind::Franka => {
-                        "Franka Panda with hand on a Clearpath Ridgeback (holonomic)"
+        for (b, spec) in BUILTIN.iter().zip(RobotSpec::builtins()) {
+            // A built-in file that does not load (the robots crate's tests parse them all) is
+            // registered under its file name with the error, which a scene naming it reports.
+            let (name, description, payload): (_, _, Arc<dyn std::any::Any + Send + Sync>) =
+                match spec {
+                    Ok(spec) => (spec.id.clone(), spec.description.clone(), Arc::new(spec)),
+                    Err(e) => {
+                        let name = b.file.rsplit('/').next().unwrap_or(b.file);
+                        let name = name.trim_end_matches(".robot.ron").to_string();
+                        let message = format!("built-in robot file does not load: {e}");
+                        (name, message.clone(), Arc::new(BrokenRobot(message)))
                     }
-                    RobotKind::Spot => "Spot with Spot Arm (legged, floating base)",
-                }
-                .to_string(),
-                payload: Arc::new(spec),
+                };
+            app.register_robot(RobotEntry {
+                name,
+                description,
+                payload,
             });
         }
         app.register_section(RobotsSection);

@@ -16,7 +16,6 @@ use crate::actions::ActionModes;
 use crate::control::{BaseVelocity, HolonomicBase, JointCommand, JointController};
 use crate::error::RobotError;
 use crate::locomotion::TrotController;
-use crate::models::RobotKind;
 use crate::robot::Robot;
 
 /// What does not change after a robot is spawned.
@@ -24,8 +23,8 @@ use crate::robot::Robot;
 pub struct RobotFixed {
     /// Robot name in the scene.
     pub name: String,
-    /// Which model.
-    pub kind: RobotKind,
+    /// The model's id (its description file's `id`).
+    pub model: String,
     /// Bodies and joints.
     pub robot: Robot,
     /// Action modes.
@@ -46,6 +45,9 @@ pub struct RobotFixed {
     pub gripper: usize,
     /// Gripper open and closed positions.
     pub gripper_open_closed: (f64, f64),
+    /// Half extents of the finger volume in the end-effector frame (what a closed gripper
+    /// grasps), m.
+    pub finger_volume: nalgebra::Vector3<f64>,
     /// End-effector frame index.
     pub ee_frame: usize,
     /// Body id (rigid context) of the body carrying the end-effector.

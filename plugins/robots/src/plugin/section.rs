@@ -1,12 +1,14 @@
 //! The `robots` scene section: the robot descriptions and scripts as written, and compiling
 //! them (checks of scripts and action modes).
 
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
 use serde::Deserialize;
 
 use modesuite_engine::components::Object;
+use modesuite_engine::deps::ron;
 use modesuite_engine::registry::{CompiledSection, SceneSection, SectionCompileContext};
 use modesuite_engine::scene::PoseDesc;
 use modesuite_engine::{SceneError, SimApp, Space, Spaces};
@@ -16,8 +18,8 @@ use super::Robots;
 use crate::actions::{ActionConfig, ActionModes, ArmMode, BaseMode, GripperMode};
 use crate::error::RobotError;
 use crate::locomotion::TrotParams;
-use crate::models::{RobotKind, RobotSpec};
-use crate::urdf::{AssetPaths, UrdfModel};
+use crate::models::RobotSpec;
+use crate::urdf::UrdfModel;
 
 /// One piece of a scripted base command: from time `t` (s since the episode start) on, drive
 /// with `v` = (vx, vy, wz) in [-1, 1] of the base's limits.
@@ -77,7 +79,8 @@ pub struct Script {
 pub struct RobotDesc {
     /// Unique name (entities are `name` and `name/link`).
     pub name: String,
-    /// Registered robot model (`franka`, `spot`).
+    /// Registered robot model (`franka`, `spot`) or a robot description file
+    /// (`*.robot.ron`), relative to the scene's folder (or to an asset root).
     pub model: String,
     /// Pose of the robot on the floor (z of the floor point under the base).
     #[serde(default)]
@@ -85,7 +88,7 @@ pub struct RobotDesc {
     /// Action modes.
     #[serde(default)]
     pub actions: ActionConfig,
-    /// Grasp force limit, N (default: the robot's).
+    /// Grasp force limit, N (default: the robot file's `gripper.grasp_force_limit`).
     #[serde(default)]
     pub grasp_force_limit: Option<f64>,
     /// Self-driving script (demo scenes); the robot then takes no action.
@@ -96,9 +99,10 @@ pub struct RobotDesc {
     #[serde(default)]
     pub start_closed: bool,
     /// Parameters of the walking controller (`base: Locomotion`), any subset of
-    /// [`TrotParams`]' fields (default: all at their defaults).
+    /// [`TrotParams`]' fields; the others keep the robot file's `walking` values. Kept as
+    /// written; [`CompiledRobot::gait`] holds the result.
     #[serde(default)]
-    pub gait: Option<TrotParams>,
+    pub gait: Option<Box<ron::value::RawValue>>,
 }
 
 /// A compiled robot: model, spec, modes.
@@ -114,7 +118,15 @@ pub struct CompiledRobot {
     pub modes: ActionModes,
     /// Grasp force limit, N.
     pub grasp_force_limit: f64,
+    /// Parameters of the walking controller: the robot file's `walking` with the scene's
+    /// `gait` fields in their place (legged robots with a walking controller).
+    pub gait: Option<TrotParams>,
 }
+
+/// The payload of a registered robot whose built-in description file does not load: the
+/// message a scene naming it reports.
+#[derive(Debug, Clone)]
+pub struct BrokenRobot(pub String);
 
 /// The `robots` scene section.
 pub struct RobotsSection;
@@ -154,17 +166,7 @@ impl SceneSection for RobotsSection {
                     "a name no object or other robot has",
                 ));
             }
-            let spec = match d.model.as_str() {
-                "franka" => RobotSpec::of(RobotKind::Franka),
-                "spot" => RobotSpec::of(RobotKind::Spot),
-                other => {
-                    return Err(SceneError::semantic(
-                        format!("{path}.model"),
-                        format!("{other:?}"),
-                        "a registered robot: [franka, spot]",
-                    ))
-                }
-            };
+            let spec = model_spec(ctx, &path, &d.model)?;
             if !(d.pose.pos.iter().chain(&d.pose.rpy).all(|x| x.is_finite())) {
                 return Err(SceneError::semantic(
                     format!("{path}.pose"),
@@ -173,11 +175,7 @@ impl SceneSection for RobotsSection {
                 ));
             }
             let modes = resolve_modes(&path, &spec, &d.actions)?;
-            let limit = d.grasp_force_limit.unwrap_or(match spec.kind {
-                // Franka Hand: 70 N continuous grasping force; Spot gripper: 130 N clamp force.
-                RobotKind::Franka => 70.0,
-                RobotKind::Spot => 130.0,
-            });
+            let limit = d.grasp_force_limit.unwrap_or(spec.grasp_force_limit);
             if !(limit.is_finite() && limit > 0.0) {
                 return Err(SceneError::semantic(
                     format!("{path}.grasp_force_limit"),
@@ -185,29 +183,46 @@ impl SceneSection for RobotsSection {
                     "a finite force > 0, N",
                 ));
             }
-            if let Some(g) = &d.gait {
-                let bad = |expected: String| {
-                    SceneError::semantic(format!("{path}.gait"), format!("{g:?}"), expected)
-                };
-                if spec.leg_joints.is_empty() {
-                    return Err(bad("no gait field: only legged robots (spot) walk".into()));
+            let gait = match (&d.gait, spec.walking) {
+                (None, walking) => walking,
+                (Some(g), None) => {
+                    return Err(SceneError::semantic(
+                        format!("{path}.gait"),
+                        g.get_ron(),
+                        format!(
+                            "no gait field: only legged robots with a walking controller walk (robot `{}` has none)",
+                            spec.id
+                        ),
+                    ))
                 }
-                g.check().map_err(bad)?;
-            }
+                (Some(g), Some(walking)) => {
+                    let bad = |expected: String| {
+                        SceneError::semantic(format!("{path}.gait"), g.get_ron(), expected)
+                    };
+                    let p = overlay_gait(&walking, g.get_ron()).map_err(bad)?;
+                    p.check().map_err(bad)?;
+                    Some(p)
+                }
+            };
             if let Some(s) = &d.script {
                 check_script(&path, s)?;
             } else if modes.discrete {
                 discrete = true;
             }
-            let model = spec
-                .load(&AssetPaths::workspace_default())
-                .map_err(|e| robot_err(&format!("{path}.model"), e))?;
+            let model = spec.load().map_err(|e| {
+                SceneError::semantic(
+                    format!("{path}.model"),
+                    format!("{:?}", d.model),
+                    e.to_string(),
+                )
+            })?;
             out.push(CompiledRobot {
                 desc: d,
                 spec,
                 model,
                 modes,
                 grasp_force_limit: limit,
+                gait,
             });
         }
         let acting = out.iter().filter(|r| r.desc.script.is_none()).count();
@@ -301,33 +316,134 @@ fn check_script(path: &str, s: &Script) -> Result<(), SceneError> {
     Ok(())
 }
 
+/// The robot a scene's `model` names: a registered robot, else a description file
+/// (`*.robot.ron`) tried against the scene's folder and then its asset roots.
+fn model_spec(
+    ctx: &SectionCompileContext,
+    path: &str,
+    model: &str,
+) -> Result<RobotSpec, SceneError> {
+    let field = format!("{path}.model");
+    let value = format!("{model:?}");
+    if let Some(entry) = ctx.registry.robots.get(model) {
+        if let Some(spec) = entry.payload.downcast_ref::<RobotSpec>() {
+            return Ok(spec.clone());
+        }
+        let expected = match entry.payload.downcast_ref::<BrokenRobot>() {
+            Some(BrokenRobot(m)) => m.clone(),
+            None => "a robot registered with a RobotSpec (the robots plugin's model type)".into(),
+        };
+        return Err(SceneError::semantic(field, value, expected));
+    }
+    if !model.ends_with(".robot.ron") {
+        let names: Vec<&str> = ctx.registry.robots.keys().map(String::as_str).collect();
+        return Err(SceneError::semantic(
+            field,
+            value,
+            format!(
+                "a registered robot: [{}], or a robot description file *.robot.ron (relative to the scene's folder)",
+                names.join(", ")
+            ),
+        ));
+    }
+    let source = ctx.source;
+    let roots: Vec<PathBuf> = std::iter::once(source.base_dir.clone())
+        .chain(source.asset_roots.iter().cloned())
+        .collect();
+    let written = Path::new(model);
+    let candidates: Vec<PathBuf> = if written.is_absolute() {
+        vec![written.to_path_buf()]
+    } else {
+        roots.iter().map(|r| r.join(written)).collect()
+    };
+    let Some(file) = candidates.iter().find(|c| c.is_file()) else {
+        return Err(SceneError::semantic(
+            field,
+            value,
+            format!(
+                "a registered robot or an existing robot description file; tried {}",
+                candidates
+                    .iter()
+                    .map(|c| c.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ));
+    };
+    RobotSpec::from_file(file, &roots)
+        .map_err(|e| SceneError::semantic(field, value, e.to_string()))
+}
+
+/// The trot parameters `walking` with the fields a scene's `gait` (RON text) gives in their
+/// place; errors say which field is unknown or of the wrong type.
+fn overlay_gait(walking: &TrotParams, gait: &str) -> Result<TrotParams, String> {
+    let gait: ron::Value = modesuite_engine::scene::ron_options()
+        .from_str(gait)
+        .map_err(|e| e.to_string())?;
+    let gait = match &gait {
+        ron::Value::Option(Some(g)) => g.as_ref(),
+        g => g,
+    };
+    let fields = match gait {
+        ron::Value::Map(m) => m.clone(),
+        // `gait: ()`: no field replaced
+        ron::Value::Unit => ron::Map::new(),
+        _ => return Err("a struct of trot parameters, e.g. (period: 0.35, kp: 900.0)".into()),
+    };
+    let text = ron::to_string(walking).map_err(|e| e.to_string())?;
+    let mut merged = match ron::from_str::<ron::Value>(&text) {
+        Ok(ron::Value::Map(m)) => m,
+        _ => return Err("the robot's walking parameters do not read back".into()),
+    };
+    for (k, v) in fields.iter() {
+        merged.insert(k.clone(), v.clone());
+    }
+    ron::Value::Map(merged)
+        .into_rust::<TrotParams>()
+        .map_err(|e| format!("trot parameters (locomotion::TrotParams): {e}"))
+}
+
 fn resolve_modes(
     path: &str,
     spec: &RobotSpec,
     c: &ActionConfig,
 ) -> Result<ActionModes, SceneError> {
-    let legged = !spec.leg_joints.is_empty();
-    let base = c.base.unwrap_or(if legged {
-        BaseMode::Locomotion
-    } else {
-        BaseMode::Velocity
-    });
-    let ok = match base {
-        BaseMode::Off => true,
-        BaseMode::Velocity => spec.base_joints.is_some(),
-        BaseMode::Locomotion | BaseMode::LegJoints => legged,
+    let base = c
+        .base
+        .or(spec.base_modes.first().copied())
+        .unwrap_or(BaseMode::Off);
+    let arm = c
+        .arm
+        .or(spec.arm_modes.first().copied())
+        .unwrap_or(ArmMode::Off);
+    let gripper = c
+        .gripper
+        .or(spec.gripper_modes.first().copied())
+        .unwrap_or(GripperMode::Off);
+    let refuse = |part: &str, mode: String, valid: String| {
+        SceneError::semantic(
+            format!("{path}.actions.{part}"),
+            mode,
+            format!("one of the {part} modes of robot `{}`: {valid}", spec.id),
+        )
     };
-    if !ok {
-        let valid = if legged {
-            "Locomotion, LegJoints or Off (a legged base)"
-        } else {
-            "Velocity or Off (a holonomic base)"
-        };
-        return Err(SceneError::semantic(
-            format!("{path}.actions.base"),
-            format!("{base:?}"),
-            valid,
-        ));
+    let list = |v: Vec<String>| v.join(", ");
+    if !spec.base_modes.contains(&base) {
+        let valid = list(spec.base_modes.iter().map(|m| format!("{m:?}")).collect());
+        return Err(refuse("base", format!("{base:?}"), valid));
+    }
+    if !spec.arm_modes.contains(&arm) {
+        let valid = list(spec.arm_modes.iter().map(|m| format!("{m:?}")).collect());
+        return Err(refuse("arm", format!("{arm:?}"), valid));
+    }
+    if !spec.gripper_modes.contains(&gripper) {
+        let valid = list(
+            spec.gripper_modes
+                .iter()
+                .map(|m| format!("{m:?}"))
+                .collect(),
+        );
+        return Err(refuse("gripper", format!("{gripper:?}"), valid));
     }
     for (field, v) in [
         ("joint_delta_scale", c.joint_delta_scale),
@@ -345,12 +461,40 @@ fn resolve_modes(
     }
     Ok(ActionModes {
         base,
-        arm: c.arm.unwrap_or(ArmMode::JointDelta),
-        gripper: c.gripper.unwrap_or(GripperMode::Binary),
+        arm,
+        gripper,
         discrete: c.discrete,
         joint_delta_scale: c.joint_delta_scale,
         ee_speed: c.ee_speed,
         ee_angular_speed: c.ee_angular_speed,
         leg_scale: c.leg_scale,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scene_gait_replaces_only_the_fields_it_gives() {
+        let walking = TrotParams {
+            period: 0.37,
+            kp: 812.5,
+            ..TrotParams::default()
+        };
+        assert_eq!(overlay_gait(&walking, "()").unwrap(), walking);
+        let p = overlay_gait(&walking, "(kp: 900, max_command: (0.25, 0.5, 1.0))").unwrap();
+        assert_eq!(
+            p,
+            TrotParams {
+                kp: 900.0,
+                max_command: [0.25, 0.5, 1.0],
+                ..walking
+            }
+        );
+        let e = overlay_gait(&walking, "(perod: 0.3)").unwrap_err();
+        assert!(e.contains("perod"), "{e}");
+        let e = overlay_gait(&walking, "0.3").unwrap_err();
+        assert!(e.contains("struct"), "{e}");
+    }
 }

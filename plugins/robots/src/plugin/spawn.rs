@@ -45,14 +45,22 @@ fn build_runtime(
     robot.name = c.desc.name.clone();
     let mut controller = JointController::hold_current(&robot, ctx)?;
     controller.gains = c.spec.default_gains(&robot);
-    let base = match c.spec.base_joints {
+    let base = match &c.spec.base_joints {
         Some([x, y, yaw]) => Some(HolonomicBase::new(&robot, x, y, yaw)?),
         None => None,
     };
-    let arm = c.spec.indices(&robot, c.spec.arm_joints)?;
-    let legs = c.spec.indices(&robot, c.spec.leg_joints)?;
-    let gripper = robot.joint_index(c.spec.gripper_joints[0])?;
-    let ee_frame = robot.frame_index(c.spec.ee_frame)?;
+    let arm = c.spec.indices(&robot, &c.spec.arm_joints)?;
+    let legs = c.spec.indices(&robot, &c.spec.leg_joints)?;
+    let leader = c
+        .spec
+        .gripper_joints
+        .first()
+        .ok_or_else(|| RobotError::InvalidInput {
+            robot: c.desc.name.clone(),
+            message: format!("robot `{}` has no gripper joint", c.spec.id),
+        })?;
+    let gripper = robot.joint_index(leader)?;
+    let ee_frame = robot.frame_index(&c.spec.ee_frame)?;
     let base_body = match base {
         Some(b) => robot.joints[b.yaw].body,
         None => 0,
@@ -104,12 +112,11 @@ fn build_runtime(
     let ee_start = robot.body_pose(ctx, base_body)?.inverse() * robot.frame_pose(ctx, ee_frame)?;
     let gripper_body = robot.frames[ee_frame].body;
     let gait = if c.modes.base == BaseMode::Locomotion {
-        Some(TrotController::new(
-            &robot,
-            &c.model,
-            &c.spec,
-            c.desc.gait.unwrap_or_default(),
-        )?)
+        let params = c.gait.ok_or_else(|| RobotError::InvalidInput {
+            robot: c.desc.name.clone(),
+            message: format!("robot `{}` has no walking controller", c.spec.id),
+        })?;
+        Some(TrotController::new(&robot, &c.model, &c.spec, params)?)
     } else {
         None
     };
@@ -117,7 +124,7 @@ fn build_runtime(
         gait,
         fixed: Arc::new(RobotFixed {
             name: c.desc.name.clone(),
-            kind: c.spec.kind,
+            model: c.spec.id.clone(),
             robot,
             modes: c.modes,
             script: c.desc.script.clone(),
@@ -128,6 +135,7 @@ fn build_runtime(
             leg_stand,
             gripper,
             gripper_open_closed: c.spec.gripper_open_closed,
+            finger_volume: c.spec.finger_volume,
             ee_frame,
             gripper_body_id: body_ids[gripper_body],
             grasp_force_limit: c.grasp_force_limit,

@@ -15,18 +15,7 @@ use crate::actions::{ArmMode, BaseMode, DiscreteKey};
 use crate::control::{BaseVelocity, JointCommand};
 use crate::error::RobotError;
 use crate::ik::{solve_ik, IkOptions};
-use crate::models::RobotKind;
 use crate::robot::Robot;
-
-/// Finger volume of a gripper in its tool frame: half extents, m.
-fn finger_volume(kind: RobotKind) -> Vector3<f64> {
-    match kind {
-        // Between the Panda's fingers: 8 cm opening, 2 cm deep finger pads.
-        RobotKind::Franka => Vector3::new(0.015, 0.04, 0.02),
-        // Inside Spot's jaw.
-        RobotKind::Spot => Vector3::new(0.03, 0.03, 0.02),
-    }
-}
 
 /// Base speed limits (vx m/s, vy m/s, wz rad/s) at a = 1 (SPEC: 0.5, 0.5, 1.0).
 pub const BASE_LIMITS: [f64; 3] = [0.5, 0.5, 1.0];
@@ -303,7 +292,7 @@ pub(super) fn robot_actions(
             name: format!("{}/gripper", f.name),
             body: f.gripper_body_id,
             volume_pose: offset_pose,
-            half_extents: finger_volume(f.kind),
+            half_extents: f.finger_volume,
             closed: r.gripper_closed,
             force_limit: f.grasp_force_limit,
         });
