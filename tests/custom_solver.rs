@@ -136,7 +136,7 @@ impl Plugin for DustPlugin {
         "test.dust"
     }
     fn build(&self, app: &mut SimApp) {
-        add_deformable_systems::<Dust>(app, DeformableSystems::Custom);
+        add_deformable_systems::<Dust>(app, DeformableSystems("test.dust"));
         app.register_body_kind(Arc::new(DustKind));
     }
 }

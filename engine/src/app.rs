@@ -56,10 +56,10 @@ pub enum EnvSystems {
 /// Public sets of [`PhysicsStep`], chained in this order.
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
 pub enum PhysicsSystems {
-    /// Controllers turn processed actions into joint targets, torques or base velocities.
+    /// Once per physics step, before the substeps: controllers turn processed actions into
+    /// joint targets, torques or base velocities, and components are pushed into the solver
+    /// contexts.
     ApplyActions,
-    /// Components -> contexts: kinematic targets, attachments.
-    Prepare,
     /// Runs [`Substep`] `substeps` times (the engine's own system lives here).
     StepSimulation,
     /// Contexts -> components: poses, deformable vertices, contact caches.
@@ -69,16 +69,13 @@ pub enum PhysicsSystems {
 /// Public sets of [`Substep`], chained in this order.
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
 pub enum SubstepSystems {
-    /// Deformables predict positions.
+    /// Per-substep controllers before any solver runs (the robots' joint motors and walking
+    /// controller).
     Predict,
-    /// Collision detection and contact generation.
-    Collide,
-    /// Constraint and elastic solves; the rigid step (`RigidSystems::Step`) is in here.
+    /// The solvers: every deformable solver's set ([`crate::DeformableSystems`], in
+    /// registration order), then the rigid step (`RigidSystems::Step`), which applies the
+    /// reactions the deformables pushed.
     Solve,
-    /// Deformable-rigid reactions are handed to the rigid bodies.
-    Couple,
-    /// Velocities, finite checks, bookkeeping.
-    Finalize,
 }
 
 /// The engine's own systems inside the public sets, for plugins to order against.
@@ -368,7 +365,6 @@ impl SimApp {
         physics.configure_sets(
             (
                 PhysicsSystems::ApplyActions,
-                PhysicsSystems::Prepare,
                 PhysicsSystems::StepSimulation,
                 PhysicsSystems::Writeback,
             )
@@ -376,16 +372,7 @@ impl SimApp {
         );
         physics.add_systems(run_substeps.in_set(PhysicsSystems::StepSimulation));
         let mut substep = new_schedule(Substep);
-        substep.configure_sets(
-            (
-                SubstepSystems::Predict,
-                SubstepSystems::Collide,
-                SubstepSystems::Solve,
-                SubstepSystems::Couple,
-                SubstepSystems::Finalize,
-            )
-                .chain(),
-        );
+        substep.configure_sets((SubstepSystems::Predict, SubstepSystems::Solve).chain());
         world.add_schedule(env_step);
         world.add_schedule(physics);
         world.add_schedule(substep);

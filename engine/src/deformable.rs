@@ -154,6 +154,8 @@ type GetFn = for<'a> fn(&'a mut World, Entity) -> Option<&'a mut dyn DeformableS
 #[derive(Resource, Default, Clone)]
 pub struct DeformableAccess {
     solvers: Vec<(HasFn, GetFn)>,
+    /// The solvers' system sets, in registration order (chained in that order).
+    sets: Vec<DeformableSystems>,
 }
 
 fn has_body<S: DeformableSolver>(world: &World, entity: Entity) -> bool {
@@ -517,10 +519,35 @@ where
     DeformableContext<S>: Component<Mutability = Mutable>,
 {
     app.insert_resource(DeformableContext::<S>::default());
-    app.world
-        .get_resource_or_insert_with(DeformableAccess::default)
-        .solvers
-        .push((has_body::<S>, get_body::<S>));
+    let mut access = app
+        .world
+        .get_resource_or_insert_with(DeformableAccess::default);
+    access.solvers.push((has_body::<S>, get_body::<S>));
+    let previous = access.sets.last().cloned();
+    if access.sets.contains(&set) {
+        app.report_setup_error(format!(
+            "deformable solver set \"{}\" is already registered; a second registration is refused",
+            set.0
+        ));
+        return;
+    }
+    access.sets.push(set.clone());
+    // One set per solver, after the previous solver's, before the rigid step.
+    let solve = set
+        .clone()
+        .in_set(crate::app::SubstepSystems::Solve)
+        .before(crate::rigid::RigidSystems::Step);
+    let writeback = set.clone().in_set(crate::app::PhysicsSystems::Writeback);
+    match previous {
+        Some(p) => {
+            app.configure_sets(crate::Substep, solve.after(p.clone()));
+            app.configure_sets(crate::PhysicsStep, writeback.after(p));
+        }
+        None => {
+            app.configure_sets(crate::Substep, solve);
+            app.configure_sets(crate::PhysicsStep, writeback);
+        }
+    }
     app.register_stateful::<DeformableContext<S>>();
     app.register_stateful_component::<DeformableNodes>();
     app.register_stateful_component::<DeformableMarkers>();

@@ -38,19 +38,14 @@ pub enum RigidSystems {
     Writeback,
 }
 
-/// Deformable solvers inside `SubstepSystems::Solve`, chained in this order and all before
+/// The system set of one deformable solver, by name (`fem.solid`, `pbd.cloth`, a plugin's
+/// own): [`add_deformable_systems`](crate::deformable::add_deformable_systems) creates one per
+/// solver inside `SubstepSystems::Solve`, chained in registration order and all before
 /// [`RigidSystems::Step`], so that their contact queries and reactions have a fixed order (no
 /// ambiguity between two solvers that both push reactions). In `PhysicsStep` the same sets are
 /// chained inside `PhysicsSystems::Writeback` for the systems that write `DeformableNodes`.
 #[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
-pub enum DeformableSystems {
-    /// Elastic solids (`fem.solid`).
-    Elastic,
-    /// Cloth (`pbd.cloth`).
-    Cloth,
-    /// Any other deformable a plugin adds.
-    Custom,
-}
+pub struct DeformableSystems(pub &'static str);
 
 /// Handle of an object's rapier body.
 #[derive(Component, Debug, Clone, Copy, PartialEq, Eq)]
@@ -72,28 +67,6 @@ impl Plugin for RigidPlugin {
         app.configure_sets(
             crate::Substep,
             RigidSystems::Step.in_set(SubstepSystems::Solve),
-        );
-        app.configure_sets(
-            crate::Substep,
-            (
-                DeformableSystems::Elastic,
-                DeformableSystems::Cloth,
-                DeformableSystems::Custom,
-            )
-                .chain()
-                .in_set(SubstepSystems::Solve)
-                .before(RigidSystems::Step),
-        );
-        // The same order for the deformables' writeback systems.
-        app.configure_sets(
-            crate::PhysicsStep,
-            (
-                DeformableSystems::Elastic,
-                DeformableSystems::Cloth,
-                DeformableSystems::Custom,
-            )
-                .chain()
-                .in_set(PhysicsSystems::Writeback),
         );
         app.add_systems(crate::Substep, rigid_step.in_set(RigidSystems::Step));
         app.add_systems(

@@ -196,7 +196,7 @@ impl Plugin for FemPlugin {
     }
 
     fn build(&self, app: &mut SimApp) {
-        add_deformable_systems::<FemSolid>(app, DeformableSystems::Elastic);
+        add_deformable_systems::<FemSolid>(app, DeformableSystems("fem.solid"));
         app.register_body_kind(Arc::new(SolidKind));
     }
 }

@@ -240,7 +240,7 @@ impl Plugin for PbdPlugin {
     }
 
     fn build(&self, app: &mut SimApp) {
-        add_deformable_systems::<Cloth>(app, DeformableSystems::Cloth);
+        add_deformable_systems::<Cloth>(app, DeformableSystems("pbd.cloth"));
         app.register_body_kind(Arc::new(ClothKind));
     }
 }
