@@ -171,8 +171,8 @@ impl TaskTerm for EngineTerm {
 }
 
 /// Configures a registered term for a task: a task term through its factory, an engine term
-/// (scene terms, compiled plugins' terms) through [`EngineTerm`]. `None`: the payload is
-/// neither.
+/// (scene terms, compiled plugins' terms) through a wrapper that evaluates it with the
+/// engine's `TermContext`. `None`: the payload is neither.
 pub fn configure_any(
     payload: &(dyn std::any::Any + Send + Sync),
     params: &str,
