@@ -28,6 +28,7 @@ use clap::{Parser, Subcommand};
 use serde_json::json;
 
 use modesuite_engine::bench::{BenchOptions, BenchRecord};
+use modesuite_engine::checkpoint::StateError;
 use modesuite_engine::prelude::*;
 use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
@@ -618,9 +619,13 @@ fn run_scene(made: make::Made, args: &RunArgs, out: &mut dyn Write) -> Result<()
     for ep in 0..args.episodes {
         let seed = args.seed.wrapping_add(ep);
         match (&args.load_state, ep) {
-            (Some(path), 0) => env
-                .load_state_file(path)
-                .map_err(|e| CliError::input(format!("--load-state {e}")))?,
+            (Some(path), 0) => env.load_state_file(path).map_err(|e| {
+                CliError::input(match e {
+                    // names the file already
+                    StateError::Io { .. } => format!("--load-state {e}"),
+                    _ => format!("--load-state {}: {e}", path.display()),
+                })
+            })?,
             _ => {
                 env.reset(Some(seed));
             }

@@ -218,20 +218,20 @@ fn tick(v: f64, span: f64) -> String {
     }
 }
 
-/// Writes an RGB image as PNG through a temporary file and a rename.
+/// Encodes an RGB image as PNG and writes it atomically
+/// ([`modesuite_engine::fsio::write_atomic`]).
 fn write_png_atomic(path: &Path, rgb: &[u8]) -> Result<(), String> {
     let err = |e: &dyn std::fmt::Display| format!("{}: cannot write: {e}", path.display());
-    let tmp = path.with_extension("png.tmp");
+    let mut png_bytes = Vec::new();
     {
-        let file = std::fs::File::create(&tmp).map_err(|e| err(&e))?;
-        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), W, H);
+        let mut enc = png::Encoder::new(&mut png_bytes, W, H);
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
         let mut w = enc.write_header().map_err(|e| err(&e))?;
         w.write_image_data(rgb).map_err(|e| err(&e))?;
         w.finish().map_err(|e| err(&e))?;
     }
-    std::fs::rename(&tmp, path).map_err(|e| err(&e))
+    modesuite_engine::fsio::write_atomic(path, &png_bytes).map_err(|e| err(&e))
 }
 
 #[cfg(test)]

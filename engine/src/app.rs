@@ -187,10 +187,7 @@ impl Stateful for SimClock {
         &mut self,
         state: &(dyn std::any::Any + Send + Sync),
     ) -> Result<(), crate::checkpoint::StateError> {
-        *self = *state
-            .downcast_ref::<Self>()
-            .ok_or_else(crate::state::mismatch::<Self>)?;
-        Ok(())
+        crate::state::restore_clone(self, state)
     }
     fn hash_state(&self, h: &mut crate::state::StateHasher) {
         h.write_u64(self.episode_steps);
@@ -508,6 +505,13 @@ impl SimApp {
         &self.setup_errors
     }
 
+    /// Reports a second registration of `name` as a `what` (refused: the first one stays).
+    pub fn report_duplicate(&mut self, what: &str, name: &str) {
+        self.report_setup_error(format!(
+            "{what} \"{name}\" is already registered; a second registration is refused (each name once per registry)"
+        ));
+    }
+
     /// Inserts `value` under `name` into one of the registry's maps unless the name is taken
     /// there; a second registration is refused (the first stays) and reported.
     fn register_unique<T>(
@@ -517,17 +521,8 @@ impl SimApp {
         value: T,
         map: fn(&mut Registry) -> &mut std::collections::BTreeMap<String, T>,
     ) -> &mut Self {
-        let taken = match map(&mut self.registry_mut()).entry(name.clone()) {
-            std::collections::btree_map::Entry::Occupied(_) => true,
-            std::collections::btree_map::Entry::Vacant(slot) => {
-                slot.insert(value);
-                false
-            }
-        };
-        if taken {
-            self.report_setup_error(format!(
-                "{what} \"{name}\" is already registered; a second registration is refused (each name once per registry)"
-            ));
+        if !crate::registry::insert_unique(map(&mut self.registry_mut()), name.clone(), value) {
+            self.report_duplicate(what, &name);
         }
         self
     }

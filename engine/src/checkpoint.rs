@@ -22,7 +22,6 @@
 //! all-or-nothing: a part that fails to decode, or a decoded state whose hash differs from the
 //! recorded one, leaves the env exactly as it was before the call.
 
-use std::io::Write;
 use std::path::Path;
 
 use serde::de::DeserializeOwned;
@@ -405,59 +404,21 @@ impl Env {
         Ok(())
     }
 
-    /// [`Env::save_state`] into a file, atomically (a temporary file in the same folder,
-    /// synced, then renamed): the file is the old one or the complete new one, never a part.
+    /// [`Env::save_state`] into a file, atomically ([`crate::fsio::write_atomic`]): the file is
+    /// the old one or the complete new one, never a part.
     pub fn save_state_file(&self, path: &Path) -> Result<(), StateError> {
-        write_atomic(path, &self.save_state()?)
+        crate::fsio::write_atomic(path, &self.save_state()?).map_err(|message| StateError::Io {
+            path: path.display().to_string(),
+            message,
+        })
     }
 
-    /// [`Env::load_state`] from a file.
+    /// [`Env::load_state`] from a file (its errors keep their kind; callers name the file).
     pub fn load_state_file(&mut self, path: &Path) -> Result<(), StateError> {
         let bytes = std::fs::read(path).map_err(|e| StateError::Io {
             path: path.display().to_string(),
             message: format!("cannot read: {e}"),
         })?;
-        self.load_state(&bytes).map_err(|e| match e {
-            StateError::Io { .. } => e,
-            other => StateError::Io {
-                path: path.display().to_string(),
-                message: other.to_string(),
-            },
-        })
+        self.load_state(&bytes)
     }
-}
-
-/// Writes `bytes` to `path` through a temporary file in the same folder that is synced and
-/// renamed over `path`; on any error (a full disk, a read-only folder) the temporary file is
-/// removed and `path` is left as it was.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), StateError> {
-    let err = |what: &str, e: std::io::Error| StateError::Io {
-        path: path.display().to_string(),
-        message: format!("{what}: {e}"),
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .map_or("state".into(), |n| n.to_string_lossy());
-    let tmp = dir.join(format!(".{name}.{}.partial", std::process::id()));
-    let written = std::fs::File::create(&tmp)
-        .map_err(|e| err("cannot create a file in its folder", e))
-        .and_then(|mut f| {
-            f.write_all(bytes)
-                .and_then(|()| f.sync_all())
-                .map_err(|e| err("cannot write", e))
-        })
-        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| err("cannot rename into place", e)));
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-        return written;
-    }
-    if let Ok(d) = std::fs::File::open(dir) {
-        // Persists the rename; not every platform can sync a folder.
-        let _ = d.sync_all();
-    }
-    Ok(())
 }

@@ -525,10 +525,7 @@ where
     access.solvers.push((has_body::<S>, get_body::<S>));
     let previous = access.sets.last().cloned();
     if access.sets.contains(&set) {
-        app.report_setup_error(format!(
-            "deformable solver set \"{}\" is already registered; a second registration is refused",
-            set.0
-        ));
+        app.report_duplicate("deformable solver set", set.0);
         return;
     }
     access.sets.push(set.clone());

@@ -37,6 +37,7 @@ pub mod deformable;
 pub mod dump;
 pub mod dynamic;
 pub mod env;
+pub mod fsio;
 pub mod math;
 pub mod registry;
 pub mod rigid;

@@ -242,6 +242,18 @@ pub struct Registry {
     pub forces: BTreeMap<String, Arc<dyn crate::terms::PassiveForce>>,
 }
 
+/// Inserts `value` under `name` unless the name is taken; whether it was inserted (a second
+/// registration is refused and the first stays; see `SimApp::report_duplicate`).
+pub fn insert_unique<T>(map: &mut BTreeMap<String, T>, name: String, value: T) -> bool {
+    match map.entry(name) {
+        std::collections::btree_map::Entry::Vacant(slot) => {
+            slot.insert(value);
+            true
+        }
+        std::collections::btree_map::Entry::Occupied(_) => false,
+    }
+}
+
 impl Registry {
     /// Which registry already uses `name`, if any (shapes, body kinds, terms, robots, sensors,
     /// passive forces), to refuse a second registration from a compiled plugin.

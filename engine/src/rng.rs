@@ -92,10 +92,7 @@ impl Stateful for EnvRng {
         &mut self,
         state: &(dyn std::any::Any + Send + Sync),
     ) -> Result<(), crate::checkpoint::StateError> {
-        *self = *state
-            .downcast_ref::<Self>()
-            .ok_or_else(crate::state::mismatch::<Self>)?;
-        Ok(())
+        crate::state::restore_clone(self, state)
     }
     fn hash_state(&self, h: &mut StateHasher) {
         for w in self.s {

@@ -81,6 +81,16 @@ pub fn mismatch<T>() -> StateError {
     )
 }
 
+/// [`Stateful::load_state`] of a part whose saved copy is its whole value (`save_state` returns
+/// `Box::new(self.clone())`): copies it back, or a [`mismatch`] for a copy of another type.
+pub fn restore_clone<T: Clone + 'static>(
+    this: &mut T,
+    state: &(dyn Any + Send + Sync),
+) -> Result<(), StateError> {
+    this.clone_from(state.downcast_ref::<T>().ok_or_else(mismatch::<T>)?);
+    Ok(())
+}
+
 type SaveFn = fn(&World) -> Box<dyn Any + Send + Sync>;
 type LoadFn = fn(&mut World, &(dyn Any + Send + Sync)) -> Result<(), StateError>;
 type HashFn = fn(&World, &mut StateHasher);
@@ -412,8 +422,7 @@ impl Stateful for PluginStates {
         Box::new(self.clone())
     }
     fn load_state(&mut self, state: &(dyn Any + Send + Sync)) -> Result<(), StateError> {
-        self.clone_from(state.downcast_ref::<Self>().ok_or_else(mismatch::<Self>)?);
-        Ok(())
+        restore_clone(self, state)
     }
     fn hash_state(&self, h: &mut StateHasher) {
         for (owner, slots) in &self.slots {

@@ -9,6 +9,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use bevy_ecs::prelude::Resource;
+use modesuite_engine::registry::insert_unique;
 use modesuite_engine::rng::EnvRng;
 use modesuite_engine::{Env, RigidContext, SimApp, SimSettings, Space};
 use modesuite_robots::{
@@ -245,22 +246,9 @@ pub struct Experts(pub BTreeMap<String, Arc<dyn Expert>>);
 /// with [`SimApp::report_setup_error`], so the app compiles no scene).
 pub fn register_expert(app: &mut SimApp, expert: Arc<dyn Expert>) {
     let name = expert.name().to_string();
-    let taken = match app
-        .world
-        .get_resource_or_insert_with(Experts::default)
-        .0
-        .entry(name.clone())
-    {
-        std::collections::btree_map::Entry::Occupied(_) => true,
-        std::collections::btree_map::Entry::Vacant(slot) => {
-            slot.insert(expert);
-            false
-        }
-    };
-    if taken {
-        app.report_setup_error(format!(
-            "expert \"{name}\" is already registered; a second registration is refused"
-        ));
+    let mut experts = app.world.get_resource_or_insert_with(Experts::default);
+    if !insert_unique(&mut experts.0, name.clone(), expert) {
+        app.report_duplicate("expert", &name);
     }
 }
 

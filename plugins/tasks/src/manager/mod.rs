@@ -205,12 +205,7 @@ impl Stateful for TaskState {
         &mut self,
         state: &(dyn std::any::Any + Send + Sync),
     ) -> Result<(), modesuite_engine::checkpoint::StateError> {
-        self.clone_from(
-            state
-                .downcast_ref::<TaskState>()
-                .ok_or_else(modesuite_engine::state::mismatch::<Self>)?,
-        );
-        Ok(())
+        modesuite_engine::state::restore_clone(self, state)
     }
     fn hash_state(&self, h: &mut StateHasher) {
         for t in &self.targets {
