@@ -97,6 +97,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         body,
         material: None,
         color: None,
+        collide: true,
+        collision_group: None,
     };
     let desc = SceneDesc {
         objects: vec![

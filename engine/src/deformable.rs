@@ -16,6 +16,9 @@ use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use crate::app::SimErrors;
 use crate::checkpoint::{Decoder, Encoder, Persist, StateError};
 use crate::components::{DeformableNodes, Object};
+use crate::contact::{
+    deliver, is_deformable_contact, ContactImpulses, ContactRefresh, DeformableContacts,
+};
 use crate::coupling::{ContactQuery, GripperState, Grippers, NoColliders, Reaction};
 use crate::rigid::{DeformableSystems, RigidContext};
 use crate::state::{mismatch, HashState, PluginStates, StateHasher, Stateful};
@@ -144,24 +147,38 @@ pub trait DeformableSolver: Send + Sync + 'static {
         let _ = (body, pose, nodes, grasp_force_limit);
         Err("this solver cannot hold nodes with a rigid body".to_string())
     }
+    /// Node masses, kg, one per node. Contact with other deformables ([`crate::contact`]) uses
+    /// them to pick which body of a touching pair resolves the contact, and only a body with
+    /// masses is pushed back by the other ([`DeformableSolver::add_node_impulses`]). Default:
+    /// none (the body is a moving collider for other deformables and is not pushed by them).
+    fn node_masses(&self) -> Option<&[f64]> {
+        None
+    }
+    /// Adds `impulses` (N s, world frame, one per node) to the node velocities, each divided by
+    /// its node's mass; nodes the solver holds fixed keep theirs. Other deformables' contacts
+    /// push the body this way. Default: not supported (an error; a solver reporting
+    /// [`DeformableSolver::node_masses`] must implement it).
+    fn add_node_impulses(&mut self, impulses: &[Vector3<f64>]) -> Result<(), String> {
+        let _ = impulses;
+        Err("this solver cannot take impulses on its nodes".to_string())
+    }
 }
 
-type HasFn = fn(&World, Entity) -> bool;
+type RefFn = for<'a> fn(&'a World, Entity) -> Option<&'a dyn DeformableSolver>;
 type GetFn = for<'a> fn(&'a mut World, Entity) -> Option<&'a mut dyn DeformableSolver>;
 
 /// How to reach the body of an entity in every solver's context, whatever its type (filled by
 /// [`add_deformable_systems`]); see [`deformable_mut`].
 #[derive(Resource, Default, Clone)]
 pub struct DeformableAccess {
-    solvers: Vec<(HasFn, GetFn)>,
+    solvers: Vec<(RefFn, GetFn)>,
     /// The solvers' system sets, in registration order (chained in that order).
     sets: Vec<DeformableSystems>,
 }
 
-fn has_body<S: DeformableSolver>(world: &World, entity: Entity) -> bool {
-    world
-        .get_resource::<DeformableContext<S>>()
-        .is_some_and(|c| c.bodies.iter().any(|b| b.entity == entity))
+fn ref_body<S: DeformableSolver>(world: &World, entity: Entity) -> Option<&dyn DeformableSolver> {
+    let ctx = world.get_resource::<DeformableContext<S>>()?;
+    ctx.get(entity).map(|s| s as &dyn DeformableSolver)
 }
 
 fn get_body<S: DeformableSolver>(
@@ -182,8 +199,19 @@ where
 /// without depending on the solver's crate); `None` when the entity is no deformable body.
 pub fn deformable_mut(world: &mut World, entity: Entity) -> Option<&mut dyn DeformableSolver> {
     let solvers = world.get_resource::<DeformableAccess>()?.solvers.clone();
-    let (_, get) = solvers.into_iter().find(|(has, _)| has(world, entity))?;
+    let (_, get) = solvers
+        .into_iter()
+        .find(|(view, _)| view(world, entity).is_some())?;
     get(world, entity)
+}
+
+/// [`deformable_mut`], read-only.
+pub fn deformable_ref(world: &World, entity: Entity) -> Option<&dyn DeformableSolver> {
+    let access = world.get_resource::<DeformableAccess>()?;
+    access
+        .solvers
+        .iter()
+        .find_map(|(view, _)| view(world, entity))
 }
 
 /// A gripper's finger volume in the world frame: an oriented box.
@@ -387,6 +415,8 @@ fn deformable_step<S: DeformableSolver>(
     grippers: Option<Res<Grippers>>,
     mut states: Option<ResMut<PluginStates>>,
     mut errors: ResMut<SimErrors>,
+    mut contacts: Option<ResMut<DeformableContacts>>,
+    mut impulses: Option<ResMut<ContactImpulses>>,
     names: Query<&Object>,
 ) {
     // Substep index within the physics step; deformables step at the first of every stride.
@@ -437,24 +467,44 @@ fn deformable_step<S: DeformableSolver>(
                     continue;
                 }
             }
-            let query: &dyn ContactQuery = match rigid.as_deref() {
+            let entity = body.entity;
+            let name = || names.get(entity).map_or("?", |o| o.name.as_str());
+            let object = contacts.as_deref().and_then(|c| c.object_of(entity));
+            if let (Some(object), Some(j)) = (object, impulses.as_deref_mut()) {
+                if let Err(e) = deliver(j, object, &mut body.solver) {
+                    errors.raise(format!("object \"{}\": contact impulses: {e}", name()));
+                    continue;
+                }
+            }
+            let rigid_query: &dyn ContactQuery = match rigid.as_deref() {
                 Some(r) => r,
                 None => &NoColliders,
             };
+            let surfaces = contacts
+                .as_deref()
+                .and_then(|c| c.query_for(entity, Some(rigid_query)));
+            let query: &dyn ContactQuery = match &surfaces {
+                Some(s) => s,
+                None => rigid_query,
+            };
             let before = reactions.len();
-            if let Err(e) =
+            let stepped =
                 body.solver
-                    .step_coupled_at(t0, dt, &settings.gravity, query, &mut reactions)
-            {
+                    .step_coupled_at(t0, dt, &settings.gravity, query, &mut reactions);
+            drop(surfaces);
+            if let Err(e) = stepped {
                 // The solver rolled its state back: the impulses of the failed step never happened.
                 reactions.truncate(before);
-                let name = names.get(body.entity).map_or("?", |o| o.name.as_str());
-                errors.raise(format!("object \"{name}\": {e}"));
+                errors.raise(format!("object \"{}\": {e}", name()));
+            }
+            if let (Some(c), Some(j)) = (contacts.as_deref_mut(), impulses.as_deref_mut()) {
+                c.after_step(entity, &body.solver, &mut reactions, before, j);
             }
         }
     }
     if let Some(r) = rigid.as_deref_mut() {
-        for re in reactions.into_iter().filter(|re| re.body != u32::MAX) {
+        let rigid_body = |re: &Reaction| re.body != u32::MAX && !is_deformable_contact(re.body);
+        for re in reactions.into_iter().filter(rigid_body) {
             r.push_reaction(re);
         }
     }
@@ -522,17 +572,19 @@ where
     let mut access = app
         .world
         .get_resource_or_insert_with(DeformableAccess::default);
-    access.solvers.push((has_body::<S>, get_body::<S>));
+    access.solvers.push((ref_body::<S>, get_body::<S>));
     let previous = access.sets.last().cloned();
     if access.sets.contains(&set) {
         app.report_duplicate("deformable solver set", set.0);
         return;
     }
     access.sets.push(set.clone());
-    // One set per solver, after the previous solver's, before the rigid step.
+    // One set per solver, after the previous solver's, between the contact refresh and flush,
+    // before the rigid step.
     let solve = set
         .clone()
         .in_set(crate::app::SubstepSystems::Solve)
+        .after(ContactRefresh)
         .before(crate::rigid::RigidSystems::Step);
     let writeback = set.clone().in_set(crate::app::PhysicsSystems::Writeback);
     match previous {
@@ -541,6 +593,7 @@ where
             app.configure_sets(crate::PhysicsStep, writeback.after(p));
         }
         None => {
+            crate::contact::add_contact_systems(app);
             app.configure_sets(crate::Substep, solve);
             app.configure_sets(crate::PhysicsStep, writeback);
         }

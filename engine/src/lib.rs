@@ -32,6 +32,7 @@ pub mod app;
 pub mod bench;
 pub mod checkpoint;
 pub mod components;
+pub mod contact;
 pub mod coupling;
 pub mod deformable;
 pub mod dump;

@@ -208,6 +208,10 @@ pub struct MaterialDesc {
     /// Density, kg/m^3 (> 0; default 1000).
     #[serde(default = "water")]
     pub density: f64,
+    /// Contact thickness of deformable surfaces made of it, m (in [0, 0.05]; default 0): other
+    /// deformables touch the surface this far out of its triangles (both sides of a cloth).
+    #[serde(default)]
+    pub contact_thickness: f64,
 }
 
 impl Default for MaterialDesc {
@@ -216,6 +220,7 @@ impl Default for MaterialDesc {
             friction: 0.5,
             restitution: 0.0,
             density: 1000.0,
+            contact_thickness: 0.0,
         }
     }
 }
@@ -261,6 +266,17 @@ pub struct ObjectDesc {
     /// Display colour, linear RGB in [0, 1] (renderer).
     #[serde(default)]
     pub color: Option<[f32; 3]>,
+    /// Whether a deformable body touches other deformables (default true); rigid colliders
+    /// always collide.
+    #[serde(default = "yes")]
+    pub collide: bool,
+    /// Deformable bodies sharing a collision group do not touch each other (default: none).
+    #[serde(default)]
+    pub collision_group: Option<String>,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// How an object moves.

@@ -27,6 +27,7 @@ pub use error::SceneError;
 pub use select::NodeSelect;
 
 use crate::components::{Object, Pose};
+use crate::contact::ContactSurface;
 use crate::registry::{BodyCompileContext, BodyKind, CompiledBody, Registry, TermKind};
 use crate::shapes::{ShapeContext, ShapeDesc, ShapeError, SurfaceMesh};
 use crate::terms::ConfiguredTerm;
@@ -197,6 +198,10 @@ pub struct ObjectModel {
     pub shape: ShapeDesc,
     /// Body.
     pub body: BodyModel,
+    /// Whether a deformable body touches other deformables.
+    pub collide: bool,
+    /// A deformable's collision group (members do not touch each other).
+    pub collision_group: Option<String>,
 }
 
 /// A compiled scene: immutable, shared by all envs through `Arc`.
@@ -346,6 +351,7 @@ fn validate_material(name: &str, m: &MaterialDesc) -> Result<(), SceneError> {
             "a number in [0, 1]",
         ));
     }
+    crate::contact::validate_material(&path, m)?;
     if !(m.density.is_finite() && m.density > 0.0) {
         return Err(SceneError::semantic(
             format!("{path}.density"),
@@ -645,7 +651,11 @@ fn compile_inner(
                 }
             }
         };
+        let deformable = matches!(body, BodyModel::Plugin { .. });
+        crate::contact::validate_object(&path, obj, deformable)?;
         objects.push(ObjectModel {
+            collide: obj.collide,
+            collision_group: obj.collision_group.clone(),
             name: obj.name.clone(),
             pose: obj.pose.isometry(),
             material,
@@ -913,7 +923,14 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
                     },
                 ));
             }
-            BodyModel::Plugin { kind, compiled } => kind.spawn(app, entity, compiled)?,
+            BodyModel::Plugin { kind, compiled } => {
+                kind.spawn(app, entity, compiled)?;
+                if let Some(triangles) = kind.surface_triangles(compiled) {
+                    let (collide, group) = (obj.collide, obj.collision_group.clone());
+                    let surface = ContactSurface::new(triangles, &obj.material, collide, group);
+                    app.world.entity_mut(entity).insert(surface);
+                }
+            }
         }
     }
     for section in &model.sections {

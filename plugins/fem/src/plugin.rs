@@ -140,6 +140,12 @@ impl DeformableSolver for FemSolid {
     fn node_velocities(&self) -> Option<&[Vector3<f64>]> {
         Some(self.velocities())
     }
+    fn node_masses(&self) -> Option<&[f64]> {
+        Some(self.masses())
+    }
+    fn add_node_impulses(&mut self, impulses: &[Vector3<f64>]) -> Result<(), String> {
+        self.add_impulses(impulses).map_err(|e| e.to_string())
+    }
     fn set_passive_forces(&mut self, forces: &[Vector3<f64>]) -> Result<(), String> {
         self.set_external_forces(forces).map_err(|e| e.to_string())
     }

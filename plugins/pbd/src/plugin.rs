@@ -179,6 +179,27 @@ impl DeformableSolver for Cloth {
     fn node_velocities(&self) -> Option<&[Vector3<f64>]> {
         Some(self.velocities())
     }
+    fn node_masses(&self) -> Option<&[f64]> {
+        Some(self.masses())
+    }
+    /// Pinned and held particles keep their velocities.
+    fn add_node_impulses(&mut self, impulses: &[Vector3<f64>]) -> Result<(), String> {
+        if impulses.len() != self.masses().len() {
+            return Err(format!(
+                "{} impulses for {} particles",
+                impulses.len(),
+                self.masses().len()
+            ));
+        }
+        let vel: Vec<Vector3<f64>> = self
+            .velocities()
+            .iter()
+            .zip(impulses)
+            .zip(self.masses())
+            .map(|((v, j), &m)| if m > 0.0 { v + j / m } else { *v })
+            .collect();
+        self.set_velocities(&vel).map_err(|e| e.to_string())
+    }
     fn follow_bodies(
         &mut self,
         pose_of: &dyn Fn(u32) -> Option<Isometry3<f64>>,

@@ -34,6 +34,7 @@ impl FemSolid {
             pos: model.mesh.rest.clone(),
             vel: z.clone(),
             ext_force: z.clone(),
+            impulse: Vec::new(),
             fric: z.clone(),
             steps: 0,
             world: Vec::new(),
@@ -145,6 +146,31 @@ impl FemSolid {
         self.pos.copy_from_slice(pos);
         self.vel.copy_from_slice(vel);
         self.contact_memory.clear();
+        Ok(())
+    }
+
+    /// Adds impulses (N s, world frame, one per node) to be applied over the next step, as a
+    /// force of impulse / dt (contacts of other deformables push the solid this way; the
+    /// implicit step spreads them through the solid, where a velocity kick on a light node
+    /// would throw it far off before the solve). They are cleared after that step, failed or
+    /// not.
+    pub fn add_impulses(&mut self, impulses: &[Vector3<f64>]) -> Result<(), FemError> {
+        if impulses.len() != self.n_nodes() {
+            return Err(FemError::InvalidState(format!(
+                "expected {} impulses",
+                self.n_nodes()
+            )));
+        }
+        if !impulses.iter().all(finite3) {
+            return Err(FemError::NonFiniteInput("impulses"));
+        }
+        if self.impulse.is_empty() {
+            self.impulse = impulses.to_vec();
+        } else {
+            for (a, j) in self.impulse.iter_mut().zip(impulses) {
+                *a += j;
+            }
+        }
         Ok(())
     }
 

@@ -215,6 +215,9 @@ pub struct FemSolid {
     pos: Vec<Vector3<f64>>,
     vel: Vec<Vector3<f64>>,
     ext_force: Vec<Vector3<f64>>,
+    /// Impulses other bodies' contacts left for the next step, N s per node (applied as a force
+    /// over that step, then cleared): empty between steps, so not part of the state.
+    impulse: Vec<Vector3<f64>>,
     /// Kinetic friction forces of sliding contacts during the current step (N); zero outside steps.
     fric: Vec<Vector3<f64>>,
     steps: u64,

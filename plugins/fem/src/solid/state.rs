@@ -245,6 +245,7 @@ impl FemSolid {
         self.pos = pos;
         self.vel = vel;
         self.ext_force = ext;
+        self.impulse.clear();
         self.steps = steps;
         self.next_id = next_id;
         self.world = world;

@@ -56,7 +56,15 @@ impl FemSolid {
         if !finite3(&gravity) {
             return Err(FemError::NonFiniteInput("gravity"));
         }
+        let impulse = std::mem::take(&mut self.impulse);
+        let loads = (!impulse.is_empty()).then(|| self.ext_force.clone());
+        for (f, j) in self.ext_force.iter_mut().zip(&impulse) {
+            *f += j / dt;
+        }
         let result = self.step_split(dt, t0, gravity, contacts, reactions, MAX_STEP_HALVINGS);
+        if let Some(loads) = loads {
+            self.ext_force = loads;
+        }
         if result.is_ok() {
             self.steps += 1;
         }

@@ -1,0 +1,183 @@
+//! Contact between deformables (issue 30): validation scenes of `scenes/examples/`, each run for
+//! 60 s of simulated time, with penetration and rest speeds measured and printed beside their
+//! tolerances.
+
+mod common;
+
+use common::{nodes, root};
+use modesuite::engine::contact::{ContactSurface, SurfaceProbe};
+use modesuite::engine::prelude::*;
+use nalgebra::Vector3;
+
+/// Surface triangles of a deformable object by name.
+fn triangles(env: &mut Env, name: &str) -> Vec<[u32; 3]> {
+    let mut q = env.app.world.query::<(&Object, &ContactSurface)>();
+    q.iter(&env.app.world)
+        .find(|(o, _)| o.name == name)
+        .map(|(_, s)| s.triangles.to_vec())
+        .unwrap()
+}
+
+/// Deepest node of `a` inside the closed surface of `b` (>= 0), m.
+fn depth_inside(env: &mut Env, a: &str, b: &str) -> f64 {
+    let (pa, pb, tb) = (nodes(env, a), nodes(env, b), triangles(env, b));
+    let probe = SurfaceProbe::new(&pb, &tb);
+    pa.iter()
+        .filter_map(|p| probe.distance(p))
+        .fold(0.0, |m, d| m.max(-d))
+}
+
+/// Largest node speed of an object over the last step, m/s (from two node snapshots).
+fn max_speed(before: &[Vector3<f64>], after: &[Vector3<f64>], dt: f64) -> f64 {
+    before
+        .iter()
+        .zip(after)
+        .map(|(a, b)| (b - a).norm() / dt)
+        .fold(0.0, f64::max)
+}
+
+/// Loads a scene file and resets it (seed 0, no autoreset).
+fn start(file: &str) -> Env {
+    let (desc, source) = modesuite::engine::scene::load_file(&root().join(file)).unwrap();
+    let mut app = modesuite::make::default_app();
+    let model = app.compile_scene(&desc, &source).unwrap();
+    app.spawn_scene(model).unwrap();
+    let mut env = Env::new(app);
+    env.autoreset = false;
+    env.reset(Some(0));
+    env
+}
+
+/// Steps `steps` times, asserting no step fails, and calls `probe` every `every` steps.
+fn run(env: &mut Env, file: &str, steps: u64, every: u64, mut probe: impl FnMut(&mut Env, u64)) {
+    for i in 1..=steps {
+        let o = env.step(&[]);
+        assert!(
+            o.info.error.is_none(),
+            "{file} step {i}: {:?}",
+            o.info.error
+        );
+        if i % every == 0 {
+            probe(env, i);
+        }
+    }
+}
+
+const DT: f64 = 1.0 / 60.0;
+
+#[test]
+fn stacked_tori_rest_on_each_other_without_passing_through() {
+    let file = "scenes/examples/tori_stacked.scene.ron";
+    let mut env = start(file);
+    let mut worst: f64 = 0.0;
+    run(&mut env, file, 3600, 30, |env, _| {
+        worst = worst.max(depth_inside(env, "upper", "lower"));
+        worst = worst.max(depth_inside(env, "lower", "upper"));
+    });
+    let before = (nodes(&mut env, "upper"), nodes(&mut env, "lower"));
+    env.step(&[]);
+    let speed = max_speed(&before.0, &nodes(&mut env, "upper"), DT).max(max_speed(
+        &before.1,
+        &nodes(&mut env, "lower"),
+        DT,
+    ));
+    let upper = nodes(&mut env, "upper");
+    let lower = nodes(&mut env, "lower");
+    let z = |n: &[Vector3<f64>]| n.iter().map(|p| p.z).sum::<f64>() / n.len() as f64;
+    println!(
+        "tori stacked, 60 s: deepest node inside the other torus {:.2} mm (<= 2 mm), rest speed {:.2e} m/s (< 1e-2), mean z upper {:.4} m, lower {:.4} m (upper on top: > lower + 0.06)",
+        worst * 1e3,
+        speed,
+        z(&upper),
+        z(&lower)
+    );
+    assert!(worst <= 2e-3);
+    assert!(speed < 1e-2);
+    assert!(
+        z(&upper) > z(&lower) + 0.06,
+        "the upper torus rests on the lower one"
+    );
+}
+
+/// Mean height of the particles of `name` over the middle (|x|, |y| < 0.2 m), m.
+fn mean_z_in_middle(env: &mut Env, name: &str) -> f64 {
+    let n = nodes(env, name);
+    let top: Vec<f64> = n
+        .iter()
+        .filter(|p| p.x.abs() < 0.2 && p.y.abs() < 0.2)
+        .map(|p| p.z)
+        .collect();
+    top.iter().sum::<f64>() / top.len().max(1) as f64
+}
+
+#[test]
+fn cloth_drapes_over_a_torus_instead_of_falling_through() {
+    let file = "scenes/examples/cloth_over_torus.scene.ron";
+    let mut env = start(file);
+    let mut worst: f64 = 0.0;
+    run(&mut env, file, 3600, 30, |env, _| {
+        worst = worst.max(depth_inside(env, "sheet", "torus"));
+    });
+    let before = (nodes(&mut env, "sheet"), nodes(&mut env, "torus"));
+    env.step(&[]);
+    let speed = max_speed(&before.0, &nodes(&mut env, "sheet"), DT).max(max_speed(
+        &before.1,
+        &nodes(&mut env, "torus"),
+        DT,
+    ));
+    // the cloth lies on the torus's tube: particles above the tube's centre line are held up
+    let sheet = nodes(&mut env, "sheet");
+    let held = sheet
+        .iter()
+        .filter(|p| ((p.x * p.x + p.y * p.y).sqrt() - 0.15).abs() < 0.02)
+        .map(|p| p.z)
+        .fold(f64::MAX, f64::min);
+    println!(
+        "cloth over torus, 60 s: deepest particle inside the torus {:.2} mm (<= 2 mm), rest speed {:.2e} m/s (< 1e-2), lowest particle over the tube at z = {:.4} m (held up: > 0.06)",
+        worst * 1e3,
+        speed,
+        held
+    );
+    assert!(worst <= 2e-3);
+    assert!(speed < 1e-2);
+    assert!(held > 0.06, "the cloth rests on the torus");
+}
+
+#[test]
+fn two_cloths_fall_on_each_other_without_passing_through() {
+    let file = "scenes/examples/cloths_falling.scene.ron";
+    let mut env = start(file);
+    // closest approach of an upper particle to the lower cloth's surface (required: half the
+    // cloth's 4 mm thickness plus the lower cloth's 2 mm contact thickness, 4 mm)
+    let mut closest = f64::MAX;
+    let mut order: f64 = f64::MAX;
+    run(&mut env, file, 3600, 30, |env, i| {
+        let (up, lo) = (nodes(env, "upper"), nodes(env, "lower"));
+        let probe = SurfaceProbe::new(&lo, &triangles(env, "lower"));
+        closest = up
+            .iter()
+            .filter_map(|p| probe.distance(p))
+            .fold(closest, f64::min);
+        if i >= 120 {
+            order = order.min(mean_z_in_middle(env, "upper") - mean_z_in_middle(env, "lower"));
+        }
+    });
+    let before = (nodes(&mut env, "upper"), nodes(&mut env, "lower"));
+    env.step(&[]);
+    let speed = max_speed(&before.0, &nodes(&mut env, "upper"), DT).max(max_speed(
+        &before.1,
+        &nodes(&mut env, "lower"),
+        DT,
+    ));
+    let depth = (0.004 - closest).max(0.0);
+    println!(
+        "two cloths, 60 s: closest approach {:.2} mm of the 4 mm required (penetration {:.2} mm <= 2 mm), upper above lower in the middle by >= {:.2} mm (> 0) from 2 s on, rest speed {:.2e} m/s (< 1e-2)",
+        closest * 1e3,
+        depth * 1e3,
+        order * 1e3,
+        speed
+    );
+    assert!(depth <= 2e-3);
+    assert!(order > 0.0, "the upper cloth stays on top");
+    assert!(speed < 1e-2);
+}
