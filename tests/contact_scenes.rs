@@ -181,3 +181,121 @@ fn two_cloths_fall_on_each_other_without_passing_through() {
     assert!(order > 0.0, "the upper cloth stays on top");
     assert!(speed < 1e-2);
 }
+
+/// An app of a scene file (paths relative to the repository).
+fn app_of(file: &str) -> SimApp {
+    let (desc, source) = modesuite::engine::scene::load_file(&root().join(file)).unwrap();
+    let mut app = modesuite::make::default_app();
+    let model = app.compile_scene(&desc, &source).unwrap();
+    app.spawn_scene(model).unwrap();
+    app
+}
+
+/// State hashes of `n` envs of a scene after `steps` zero-action steps on `threads` threads.
+fn hashes(file: &str, n: usize, threads: usize, steps: usize) -> Vec<u64> {
+    let mut v = VecEnv::build(n, threads, |_| Ok::<_, String>(app_of(file))).unwrap();
+    v.reset(Some(7));
+    for _ in 0..steps {
+        v.step(&[]).unwrap();
+    }
+    v.state_hashes()
+}
+
+#[test]
+fn contacts_are_bit_identical_for_thread_counts_and_through_state_files() {
+    for (file, steps) in [
+        ("scenes/examples/cloths_falling.scene.ron", 60),
+        ("scenes/examples/cloth_over_torus.scene.ron", 30),
+    ] {
+        let one = hashes(file, 3, 1, steps);
+        let two = hashes(file, 3, 2, steps);
+        println!("{file}: {steps} steps, hashes 1 thread {:016x}, 2 threads {:016x}", one[0], two[0]);
+        assert_eq!(one, two, "{file}: 1 vs 2 threads");
+    }
+    // A state saved while contact impulses are owed continues exactly.
+    let file = "scenes/examples/cloths_falling.scene.ron";
+    let mut a = start(file);
+    let mut owed = 0;
+    for _ in 0..25 {
+        a.step(&[]);
+        owed = owed.max(a.app.world.resource::<modesuite::engine::contact::ContactImpulses>().0.len());
+    }
+    let pending = a.app.world.resource::<modesuite::engine::contact::ContactImpulses>().0.len();
+    let saved = a.save_state().unwrap();
+    let mut b = start(file);
+    b.load_state(&saved).unwrap();
+    for _ in 0..20 {
+        a.step(&[]);
+        b.step(&[]);
+    }
+    println!("state file at step 25 with {pending} bodies owed impulses (max {owed}): hashes after 20 more steps {:016x} and {:016x}", a.state_hash(), b.state_hash());
+    assert!(pending > 0, "the save point has impulses in flight");
+    assert_eq!(a.state_hash(), b.state_hash());
+}
+
+#[test]
+fn contact_fields_are_checked_with_located_errors() {
+    let scene = |extra_obj: &str, material: &str| {
+        format!(
+            r#"Scene(
+    materials: {{"m": ({material})}},
+    objects: [
+        (name: "ground", shape: Plane(size: (2.0, 2.0)), body: Static{extra_obj}),
+        (name: "sheet", shape: Grid(size: (0.5, 0.5), resolution: (5, 5)), pose: (pos: (0.0, 0.0, 0.2)),
+         body: Kind(kind: "pbd.cloth", params: ()), material: "m"),
+    ],
+)"#
+        )
+    };
+    let cases = [
+        (scene("", "contact_thickness: -0.001"), "materials[\"m\"].contact_thickness"),
+        (scene("", "contact_thickness: 0.2"), "materials[\"m\"].contact_thickness"),
+        (scene(", collide: false", ""), "objects[0] \"ground\".collide"),
+        (scene(", collision_group: Some(\"a\")", ""), "objects[0] \"ground\".collision_group"),
+    ];
+    for (text, path) in cases {
+        let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
+        let err = modesuite::make::default_app()
+            .compile_scene(&desc, &SceneSource::in_memory("."))
+            .err()
+            .expect("refused")
+            .to_string();
+        println!("{err}");
+        assert!(err.contains(path), "{err} names {path}");
+    }
+    // an empty group name on a deformable
+    let text = scene("", "").replace("material: \"m\")", "material: \"m\", collision_group: Some(\" \"))");
+    let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
+    let err = modesuite::make::default_app()
+        .compile_scene(&desc, &SceneSource::in_memory("."))
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(err.contains("objects[1] \"sheet\".collision_group"), "{err}");
+}
+
+#[test]
+fn collide_false_and_shared_groups_let_deformables_pass_through_each_other() {
+    let text = std::fs::read_to_string(root().join("scenes/examples/cloths_falling.scene.ron")).unwrap();
+    for (what, edit) in [
+        ("collide: false", ("name: \"upper\",", "name: \"upper\", collide: false,")),
+        (
+            "one collision group",
+            ("material: \"cotton\",\n        ),\n    ],", "material: \"cotton\", collision_group: Some(\"g\"),\n        ),\n    ],"),
+        ),
+    ] {
+        let mut text = text.replace(edit.0, edit.1);
+        if what == "one collision group" {
+            text = text.replace("name: \"lower\",", "name: \"lower\", collision_group: Some(\"g\"),");
+        }
+        let mut env = Env::new(common::app_from_ron(&text));
+        env.autoreset = false;
+        env.reset(Some(0));
+        for _ in 0..120 {
+            env.step(&[]);
+        }
+        let z = mean_z_in_middle(&mut env, "upper");
+        println!("{what}: the upper cloth's middle ends at z = {z:.4} m (on the ground, through the lower one: < 0.003)");
+        assert!(z < 0.003, "{what}");
+    }
+}
