@@ -209,7 +209,10 @@ fn contacts_are_bit_identical_for_thread_counts_and_through_state_files() {
     ] {
         let one = hashes(file, 3, 1, steps);
         let two = hashes(file, 3, 2, steps);
-        println!("{file}: {steps} steps, hashes 1 thread {:016x}, 2 threads {:016x}", one[0], two[0]);
+        println!(
+            "{file}: {steps} steps, hashes 1 thread {:016x}, 2 threads {:016x}",
+            one[0], two[0]
+        );
         assert_eq!(one, two, "{file}: 1 vs 2 threads");
     }
     // A state saved while contact impulses are owed continues exactly.
@@ -218,9 +221,20 @@ fn contacts_are_bit_identical_for_thread_counts_and_through_state_files() {
     let mut owed = 0;
     for _ in 0..25 {
         a.step(&[]);
-        owed = owed.max(a.app.world.resource::<modesuite::engine::contact::ContactImpulses>().0.len());
+        owed = owed.max(
+            a.app
+                .world
+                .resource::<modesuite::engine::contact::ContactImpulses>()
+                .0
+                .len(),
+        );
     }
-    let pending = a.app.world.resource::<modesuite::engine::contact::ContactImpulses>().0.len();
+    let pending = a
+        .app
+        .world
+        .resource::<modesuite::engine::contact::ContactImpulses>()
+        .0
+        .len();
     let saved = a.save_state().unwrap();
     let mut b = start(file);
     b.load_state(&saved).unwrap();
@@ -248,10 +262,22 @@ fn contact_fields_are_checked_with_located_errors() {
         )
     };
     let cases = [
-        (scene("", "contact_thickness: -0.001"), "materials[\"m\"].contact_thickness"),
-        (scene("", "contact_thickness: 0.2"), "materials[\"m\"].contact_thickness"),
-        (scene(", collide: false", ""), "objects[0] \"ground\".collide"),
-        (scene(", collision_group: Some(\"a\")", ""), "objects[0] \"ground\".collision_group"),
+        (
+            scene("", "contact_thickness: -0.001"),
+            "materials[\"m\"].contact_thickness",
+        ),
+        (
+            scene("", "contact_thickness: 0.2"),
+            "materials[\"m\"].contact_thickness",
+        ),
+        (
+            scene(", collide: false", ""),
+            "objects[0] \"ground\".collide",
+        ),
+        (
+            scene(", collision_group: Some(\"a\")", ""),
+            "objects[0] \"ground\".collision_group",
+        ),
     ];
     for (text, path) in cases {
         let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
@@ -264,29 +290,45 @@ fn contact_fields_are_checked_with_located_errors() {
         assert!(err.contains(path), "{err} names {path}");
     }
     // an empty group name on a deformable
-    let text = scene("", "").replace("material: \"m\")", "material: \"m\", collision_group: Some(\" \"))");
+    let text = scene("", "").replace(
+        "material: \"m\")",
+        "material: \"m\", collision_group: Some(\" \"))",
+    );
     let desc = modesuite::engine::scene::parse_str(&text, "<test>").unwrap();
     let err = modesuite::make::default_app()
         .compile_scene(&desc, &SceneSource::in_memory("."))
         .err()
         .expect("refused")
         .to_string();
-    assert!(err.contains("objects[1] \"sheet\".collision_group"), "{err}");
+    assert!(
+        err.contains("objects[1] \"sheet\".collision_group"),
+        "{err}"
+    );
 }
 
 #[test]
 fn collide_false_and_shared_groups_let_deformables_pass_through_each_other() {
-    let text = std::fs::read_to_string(root().join("scenes/examples/cloths_falling.scene.ron")).unwrap();
+    let text =
+        std::fs::read_to_string(root().join("scenes/examples/cloths_falling.scene.ron")).unwrap();
     for (what, edit) in [
-        ("collide: false", ("name: \"upper\",", "name: \"upper\", collide: false,")),
+        (
+            "collide: false",
+            ("name: \"upper\",", "name: \"upper\", collide: false,"),
+        ),
         (
             "one collision group",
-            ("material: \"cotton\",\n        ),\n    ],", "material: \"cotton\", collision_group: Some(\"g\"),\n        ),\n    ],"),
+            (
+                "material: \"cotton\",\n        ),\n    ],",
+                "material: \"cotton\", collision_group: Some(\"g\"),\n        ),\n    ],",
+            ),
         ),
     ] {
         let mut text = text.replace(edit.0, edit.1);
         if what == "one collision group" {
-            text = text.replace("name: \"lower\",", "name: \"lower\", collision_group: Some(\"g\"),");
+            text = text.replace(
+                "name: \"lower\",",
+                "name: \"lower\", collision_group: Some(\"g\"),",
+            );
         }
         let mut env = Env::new(common::app_from_ron(&text));
         env.autoreset = false;
@@ -298,4 +340,88 @@ fn collide_false_and_shared_groups_let_deformables_pass_through_each_other() {
         println!("{what}: the upper cloth's middle ends at z = {z:.4} m (on the ground, through the lower one: < 0.003)");
         assert!(z < 0.003, "{what}");
     }
+}
+
+/// Pose and speed (linear, m/s) of a rigid object by name.
+fn rigid(env: &mut Env, name: &str) -> (nalgebra::Isometry3<f64>, f64) {
+    let mut q = env.app.world.query::<(&Object, &Pose, &Velocity)>();
+    q.iter(&env.app.world)
+        .find(|(o, _, _)| o.name == name)
+        .map(|(_, p, v)| (p.0, v.linear.norm().max(v.angular.norm() * 0.1)))
+        .unwrap()
+}
+
+/// Deepest node of a deformable inside a box of half extents `h` at `pose`, m (>= 0).
+fn depth_in_box(nodes: &[Vector3<f64>], pose: &nalgebra::Isometry3<f64>, h: Vector3<f64>) -> f64 {
+    nodes
+        .iter()
+        .map(|p| {
+            let l = pose.inverse_transform_point(&nalgebra::Point3::from(*p));
+            (0..3).map(|k| h[k] - l[k].abs()).fold(f64::MAX, f64::min)
+        })
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn heavy_box_compresses_a_foam_block_as_linear_elasticity_predicts() {
+    let file = "scenes/examples/box_on_foam.scene.ron";
+    let mut env = start(file);
+    let h = Vector3::new(0.16, 0.16, 0.05);
+    let mut worst: f64 = 0.0;
+    run(&mut env, file, 3600, 30, |env, _| {
+        let (pose, _) = rigid(env, "box");
+        worst = worst.max(depth_in_box(&nodes(env, "foam"), &pose, h));
+    });
+    let (_, box_speed) = rigid(&mut env, "box");
+    let before = nodes(&mut env, "foam");
+    env.step(&[]);
+    let speed = max_speed(&before, &nodes(&mut env, "foam"), DT).max(box_speed);
+    let top: Vec<f64> = nodes(&mut env, "foam")
+        .iter()
+        .map(|p| p.z)
+        .filter(|z| *z > 0.09)
+        .collect();
+    let compression = 0.1 - top.iter().sum::<f64>() / top.len() as f64;
+    // uniaxial (Poisson ratio 0): the box's weight over the block's area, plus the block's own
+    // weight, which compresses it by half as much as the same load on top
+    let (e, a, h_block, g) = (1e5, 0.09, 0.1, 9.81);
+    let load = 20.0 * g + 0.5 * 300.0 * a * h_block * g;
+    let theory = load * h_block / (e * a);
+    println!(
+        "box on foam, 60 s: compression {:.4} mm, linear elasticity {:.4} mm (ratio {:.4}, within 5 %), deepest foam node inside the box {:.3} mm (<= 2 mm), rest speed {:.2e} m/s (< 1e-2)",
+        compression * 1e3,
+        theory * 1e3,
+        compression / theory,
+        worst * 1e3,
+        speed
+    );
+    assert!((compression / theory - 1.0).abs() < 0.05);
+    assert!(worst <= 2e-3);
+    assert!(speed < 1e-2);
+}
+
+#[test]
+fn box_dropped_onto_a_heavier_torus_comes_to_rest() {
+    let file = "scenes/examples/box_on_torus.scene.ron";
+    let mut env = start(file);
+    let h = Vector3::new(0.125, 0.125, 0.05);
+    let mut worst: f64 = 0.0;
+    run(&mut env, file, 3600, 30, |env, _| {
+        let (pose, _) = rigid(env, "box");
+        worst = worst.max(depth_in_box(&nodes(env, "torus"), &pose, h));
+    });
+    let (pose, box_speed) = rigid(&mut env, "box");
+    let before = nodes(&mut env, "torus");
+    env.step(&[]);
+    let speed = max_speed(&before, &nodes(&mut env, "torus"), DT).max(box_speed);
+    println!(
+        "box on torus, 60 s: deepest torus node inside the box {:.3} mm (<= 2 mm), rest speed {:.2e} m/s (< 1e-2), box at ({:.3}, {:.3}, {:.3}) m",
+        worst * 1e3,
+        speed,
+        pose.translation.x,
+        pose.translation.y,
+        pose.translation.z
+    );
+    assert!(worst <= 2e-3);
+    assert!(speed < 1e-2);
 }
