@@ -85,7 +85,7 @@ pub enum Command {
     Eval(learn::EvalArgs),
     /// Plot training curves (mean and standard deviation over run folders) into a PNG.
     Plot(learn::PlotArgs),
-    /// Run a benchmark suite: engine, fem, pbd, robots, render, tasks.
+    /// Run a benchmark suite: engine, fem, pbd, contact, robots, render, tasks.
     Bench {
         /// Suite name.
         name: String,
@@ -809,12 +809,13 @@ fn bench(
         "engine" => modesuite_engine::bench::engine_cases(&opts).map_err(CliError::runtime)?,
         "fem" => crate::benches::fem_cases(&opts).map_err(CliError::runtime)?,
         "pbd" => crate::benches::pbd_cases(&opts).map_err(CliError::runtime)?,
+        "contact" => crate::bench_contact::contact_cases(&opts).map_err(CliError::runtime)?,
         "robots" => crate::benches::robots_cases(&opts).map_err(CliError::runtime)?,
         "render" => crate::benches::render_cases(&opts).map_err(CliError::runtime)?,
         "tasks" => crate::benches::tasks_cases(&opts).map_err(CliError::runtime)?,
         other => {
             return Err(CliError::input(format!(
-                "bench {other}: unknown suite; available: engine, fem, pbd, robots, render, tasks"
+                "bench {other}: unknown suite; available: engine, fem, pbd, contact, robots, render, tasks"
             )))
         }
     };

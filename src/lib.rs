@@ -16,6 +16,7 @@ pub use modesuite_render as render;
 pub use modesuite_robots as robots;
 pub use modesuite_tasks as tasks;
 
+pub mod bench_contact;
 pub mod benches;
 pub mod cli;
 pub mod episode;
