@@ -365,6 +365,21 @@ impl Stateful for ContactImpulses {
 #[derive(Resource, Default)]
 pub struct DeformableContacts {
     entries: Vec<Entry>,
+    /// Contact surfaces spawned into this world (an upper bound of those alive): below two the
+    /// refresh does not run at all.
+    spawned: usize,
+}
+
+/// Gives a spawned deformable its [`ContactSurface`] (the scene spawner calls it).
+pub(crate) fn attach_surface(world: &mut World, entity: Entity, surface: ContactSurface) {
+    world.entity_mut(entity).insert(surface);
+    if let Some(mut c) = world.get_resource_mut::<DeformableContacts>() {
+        c.spawned += 1;
+    }
+}
+
+fn two_or_more(contacts: Option<Res<DeformableContacts>>) -> bool {
+    contacts.is_some_and(|c| c.spawned >= 2)
 }
 
 impl DeformableContacts {
@@ -643,7 +658,10 @@ pub(crate) fn add_contact_systems(app: &mut crate::SimApp) {
         crate::Substep,
         ContactRefresh.in_set(crate::app::SubstepSystems::Solve),
     );
-    app.add_systems(crate::Substep, refresh_contacts.in_set(ContactRefresh));
+    app.add_systems(
+        crate::Substep,
+        refresh_contacts.run_if(two_or_more).in_set(ContactRefresh),
+    );
 }
 
 /// A deformable surface frozen for measurements: signed distances of points from it, m,

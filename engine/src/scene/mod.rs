@@ -928,7 +928,7 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
                 if let Some(triangles) = kind.surface_triangles(compiled) {
                     let (collide, group) = (obj.collide, obj.collision_group.clone());
                     let surface = ContactSurface::new(triangles, &obj.material, collide, group);
-                    app.world.entity_mut(entity).insert(surface);
+                    crate::contact::attach_surface(&mut app.world, entity, surface);
                 }
             }
         }
