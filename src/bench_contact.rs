@@ -87,8 +87,11 @@ fn cases() -> Vec<(&'static str, String)> {
     ]
 }
 
-/// Every deformable's name, nodes and (closed) surface.
-fn deformables(env: &mut Env) -> Vec<(String, Vec<Vector3<f64>>, Option<Vec<[u32; 3]>>)> {
+/// A deformable's name, nodes and closed surface (if its surface closes).
+type Deformable = (String, Vec<Vector3<f64>>, Option<Vec<[u32; 3]>>);
+
+/// Every deformable of the env.
+fn deformables(env: &mut Env) -> Vec<Deformable> {
     let mut q = env
         .app
         .world
