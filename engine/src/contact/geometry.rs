@@ -3,59 +3,87 @@
 
 use nalgebra::Vector3;
 
-/// The closest point of triangle `(a, b, c)` to `p`, as barycentric weights `(wa, wb, wc)`, and
-/// whether it lies inside the face (not on an edge or a corner).
-pub(crate) fn closest_on_triangle(
+/// The closest point of a triangle to a point ([`closest_on_triangle`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClosestPoint {
+    /// The point, m.
+    pub point: Vector3<f64>,
+    /// Its barycentric weights on the corners `(a, b, c)`.
+    pub weights: [f64; 3],
+    /// Whether it lies inside the face (not on an edge or a corner).
+    pub inside: bool,
+}
+
+/// The closest point of triangle `(a, b, c)` to `p` (the Voronoi regions of the corners, the
+/// edges and the face: Ericson, Real-Time Collision Detection, 5.1.5). A degenerate (zero-area)
+/// triangle whose face region is reached gives its first corner.
+pub fn closest_on_triangle(
     p: &Vector3<f64>,
     a: &Vector3<f64>,
     b: &Vector3<f64>,
     c: &Vector3<f64>,
-) -> ([f64; 3], bool) {
-    // Voronoi regions of the corners, the edges and the face (Ericson, Real-Time Collision
-    // Detection, 5.1.5), written for this crate.
+) -> ClosestPoint {
+    let corner = |point: &Vector3<f64>, k: usize| {
+        let mut weights = [0.0; 3];
+        weights[k] = 1.0;
+        ClosestPoint {
+            point: *point,
+            weights,
+            inside: false,
+        }
+    };
+    let edge = |point: Vector3<f64>, weights: [f64; 3]| ClosestPoint {
+        point,
+        weights,
+        inside: false,
+    };
     let ab = b - a;
     let ac = c - a;
     let ap = p - a;
     let d1 = ab.dot(&ap);
     let d2 = ac.dot(&ap);
     if d1 <= 0.0 && d2 <= 0.0 {
-        return ([1.0, 0.0, 0.0], false);
+        return corner(a, 0);
     }
     let bp = p - b;
     let d3 = ab.dot(&bp);
     let d4 = ac.dot(&bp);
     if d3 >= 0.0 && d4 <= d3 {
-        return ([0.0, 1.0, 0.0], false);
+        return corner(b, 1);
     }
     let vc = d1 * d4 - d3 * d2;
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
         let v = d1 / (d1 - d3);
-        return ([1.0 - v, v, 0.0], false);
+        return edge(a + ab * v, [1.0 - v, v, 0.0]);
     }
     let cp = p - c;
     let d5 = ab.dot(&cp);
     let d6 = ac.dot(&cp);
     if d6 >= 0.0 && d5 <= d6 {
-        return ([0.0, 0.0, 1.0], false);
+        return corner(c, 2);
     }
     let vb = d5 * d2 - d1 * d6;
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
         let w = d2 / (d2 - d6);
-        return ([1.0 - w, 0.0, w], false);
+        return edge(a + ac * w, [1.0 - w, 0.0, w]);
     }
     let va = d3 * d6 - d5 * d4;
     if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return ([0.0, 1.0 - w, w], false);
+        return edge(b + (c - b) * w, [0.0, 1.0 - w, w]);
     }
-    let denom = va + vb + vc;
-    if !(denom.is_finite() && denom > 0.0) {
-        // a degenerate (zero-area) triangle: its first corner
-        return ([1.0, 0.0, 0.0], false);
+    let sum = va + vb + vc;
+    if !(sum.is_finite() && sum > 0.0) {
+        return corner(a, 0);
     }
-    let v = vb / denom;
-    let w = vc / denom;
-    ([1.0 - v - w, v, w], true)
+    let den = 1.0 / sum;
+    let v = vb * den;
+    let w = vc * den;
+    ClosestPoint {
+        point: a + ab * v + ac * w,
+        weights: [1.0 - v - w, v, w],
+        inside: true,
+    }
 }
 
 /// An axis-aligned box.
@@ -225,8 +253,7 @@ mod tests {
         for i in 0..21 {
             for j in 0..21 {
                 let p = v(-0.5 + 0.1 * i as f64, -0.5 + 0.1 * j as f64, 0.3);
-                let (w, _) = closest_on_triangle(&p, &a, &b, &c);
-                let q = a * w[0] + b * w[1] + c * w[2];
+                let q = closest_on_triangle(&p, &a, &b, &c).point;
                 // brute force over a fine grid of the triangle
                 let mut best = f64::INFINITY;
                 for s in 0..=200 {

@@ -45,7 +45,8 @@ use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::deformable::{deformable_ref, DeformableSolver};
 use crate::scene::{MaterialDesc, ObjectDesc, SceneError};
 use crate::state::{restore_clone, StateHasher, Stateful};
-use geometry::{closest_on_triangle, TriangleBvh};
+use geometry::TriangleBvh;
+pub use geometry::{closest_on_triangle, ClosestPoint};
 
 /// Body ids from here up in [`PointContact::body`] and [`Reaction::body`] name a deformable
 /// surface (the id minus this base: its index among the env's surfaces, in spawn order), not a
@@ -187,17 +188,16 @@ impl Entry {
     }
 
     /// The closest point of the triangles to `p` among those whose padded boxes meet the cube
-    /// `p +- r`: squared distance, triangle, barycentric weights, whether inside the face. Ties
-    /// go to the lower triangle index, whatever the hierarchy's order.
-    fn closest(&self, p: &Vector3<f64>, r: f64) -> Option<(f64, u32, [f64; 3], bool)> {
-        let mut best: Option<(f64, u32, [f64; 3], bool)> = None;
+    /// `p +- r`: squared distance, triangle, point. Ties go to the lower triangle index,
+    /// whatever the hierarchy's order.
+    fn closest(&self, p: &Vector3<f64>, r: f64) -> Option<(f64, u32, ClosestPoint)> {
+        let mut best: Option<(f64, u32, ClosestPoint)> = None;
         self.bvh.visit(p, r, |t| {
             let [a, b, c] = self.surface.triangles[t as usize].map(|i| self.pos[i as usize]);
-            let (w, inside) = closest_on_triangle(p, &a, &b, &c);
-            let q = a * w[0] + b * w[1] + c * w[2];
-            let d2 = (p - q).norm_squared();
-            if best.is_none_or(|(bd, bt, _, _)| d2 < bd || (d2 == bd && t < bt)) {
-                best = Some((d2, t, w, inside));
+            let cp = closest_on_triangle(p, &a, &b, &c);
+            let d2 = (p - cp.point).norm_squared();
+            if best.is_none_or(|(bd, bt, _)| d2 < bd || (d2 == bd && t < bt)) {
+                best = Some((d2, t, cp));
             }
         });
         best
@@ -207,10 +207,10 @@ impl Entry {
     /// its thickness less `inset`), as a contact.
     fn contact(&self, p: &Vector3<f64>, max_distance: f64, inset: f64) -> Option<PointContact> {
         let thick = self.surface.thickness - inset;
-        let (d2, t, w, inside) = self.closest(p, max_distance)?;
+        let (d2, t, cp) = self.closest(p, max_distance)?;
+        let (q, w, inside) = (cp.point, cp.weights, cp.inside);
         let tri = self.surface.triangles[t as usize].map(|i| i as usize);
         let [a, b, c] = tri.map(|i| self.pos[i]);
-        let q = a * w[0] + b * w[1] + c * w[2];
         let face = (b - a).cross(&(c - a)).try_normalize(1e-300)?;
         let d = d2.sqrt();
         let delta = p - q;
@@ -259,13 +259,13 @@ impl Entry {
         // the triangle under the contact point (near it: the point is on the offset surface)
         let b = self.bvh.bounds();
         let near = self.surface.thickness + 1e-3;
-        let Some((_, t, w, _)) = self
+        let Some((_, t, cp)) = self
             .closest(point, near)
             .or_else(|| self.closest(point, (b.hi - b.lo).norm() + (point - b.lo).norm()))
         else {
             return;
         };
-        let tri = &self.surface.triangles[t as usize];
+        let (tri, w) = (&self.surface.triangles[t as usize], cp.weights);
         let wm: [f64; 3] = std::array::from_fn(|k| w[k] * self.masses[tri[k] as usize].max(0.0));
         let total: f64 = wm.iter().sum();
         let share = if total > 0.0 {

@@ -285,49 +285,14 @@ impl SelfCollision {
     }
 }
 
-/// Closest point to `p` on triangle `abc` (Ericson, "Real-Time Collision Detection", 5.1.5).
+/// Closest point to `p` on triangle `abc` (the engine's, shared with deformable contact).
 pub(crate) fn closest_point_triangle(
     p: &Vector3<f64>,
     a: &Vector3<f64>,
     b: &Vector3<f64>,
     c: &Vector3<f64>,
 ) -> Vector3<f64> {
-    let ab = b - a;
-    let ac = c - a;
-    let ap = p - a;
-    let d1 = ab.dot(&ap);
-    let d2 = ac.dot(&ap);
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return *a;
-    }
-    let bp = p - b;
-    let d3 = ab.dot(&bp);
-    let d4 = ac.dot(&bp);
-    if d3 >= 0.0 && d4 <= d3 {
-        return *b;
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return a + ab * (d1 / (d1 - d3));
-    }
-    let cp = p - c;
-    let d5 = ab.dot(&cp);
-    let d6 = ac.dot(&cp);
-    if d6 >= 0.0 && d5 <= d6 {
-        return *c;
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return a + ac * (d2 / (d2 - d6));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    }
-    let den = 1.0 / (va + vb + vc);
-    let v = vb * den;
-    let w = vc * den;
-    a + ab * v + ac * w
+    modesuite_engine::contact::closest_on_triangle(p, a, b, c).point
 }
 
 #[cfg(test)]
