@@ -263,12 +263,18 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), LearnError> {
     std::fs::create_dir_all(dir).map_err(io)?;
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
     let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    {
-        let mut f = std::fs::File::create(&tmp).map_err(io)?;
-        f.write_all(bytes).map_err(io)?;
-        f.sync_all().map_err(io)?;
+    let written = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = written {
+        // A full disk or a failed rename leaves the old file as it was and no temporary behind.
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io(e));
     }
-    std::fs::rename(&tmp, path).map_err(io)?;
     if let Ok(d) = std::fs::File::open(dir) {
         // Persist the rename itself; not every platform can sync a folder.
         let _ = d.sync_all();
@@ -286,6 +292,24 @@ mod tests {
             env: "point-reach obs 6 act 2".into(),
             num_envs: 4,
         }
+    }
+
+    #[test]
+    fn a_failed_atomic_write_leaves_no_temporary_file() {
+        let dir = std::env::temp_dir().join(format!("mslearn-atomic-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        // the target is a non-empty folder: the rename over it fails
+        let target = dir.join("taken");
+        std::fs::create_dir_all(target.join("inside")).unwrap();
+        let err = write_atomic(&target, b"data").unwrap_err();
+        let left: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        println!("refused: {err}; left in the folder: {left:?}");
+        assert_eq!(left, vec!["taken".to_string()]);
+        assert!(target.join("inside").is_dir());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
