@@ -226,6 +226,19 @@ fn bench_suites_json_have_their_keys() {
             &["MoDe-Franka-Place-v0", "MoDe-Franka-Place-v0_x16"][..],
             &["task"][..],
         ),
+        (
+            "contact",
+            &[
+                "tori_stacked",
+                "cloth_over_torus",
+                "cloths_falling",
+                "box_on_foam",
+                "K_box_on_block",
+                "K_blocks",
+                "K_cloth_on_block",
+            ][..],
+            &["steps", "deepest_mm", "max_speed"][..],
+        ),
     ] {
         let text = stdout_ok(modesuite().args(["bench", suite, "--json", "--scale", "0.01"]));
         let lines: Vec<serde_json::Value> = text
