@@ -14,7 +14,6 @@ use std::time::Instant;
 use modesuite_engine::bench::{BenchOptions, BenchRecord};
 use modesuite_engine::components::{DeformableNodes, Object, Pose};
 use modesuite_engine::contact::{ContactSurface, SurfaceProbe};
-use modesuite_engine::scene::SceneSource;
 use modesuite_engine::Env;
 use nalgebra::Vector3;
 use serde_json::json;
@@ -108,13 +107,7 @@ fn deformables(env: &mut Env) -> Vec<Deformable> {
 pub fn contact_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
     let mut out = Vec::new();
     for (case, text) in cases() {
-        let desc = modesuite_engine::scene::parse_str(&text, case).map_err(|e| e.to_string())?;
-        let mut app = crate::make::default_app();
-        let model = app
-            .compile_scene(&desc, &SceneSource::in_memory("."))
-            .map_err(|e| format!("{case}: {e}"))?;
-        app.spawn_scene(model).map_err(|e| format!("{case}: {e}"))?;
-        let mut env = Env::new(app);
+        let mut env = crate::make::env_from_text(&text).map_err(|e| format!("{case}: {e}"))?;
         env.autoreset = false;
         env.reset(Some(0));
         let n = ((600.0 * opts.scale) as usize).max(2);

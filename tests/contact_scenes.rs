@@ -27,22 +27,32 @@ fn depth_inside(env: &mut Env, a: &str, b: &str) -> f64 {
         .fold(0.0, |m, d| m.max(-d))
 }
 
-/// Largest node speed of an object over the last step, m/s (from two node snapshots).
-fn max_speed(before: &[Vector3<f64>], after: &[Vector3<f64>], dt: f64) -> f64 {
-    before
+/// Steps once more and returns the largest node speed of the objects `names` over that step,
+/// m/s.
+fn rest_speed(env: &mut Env, names: &[&str]) -> f64 {
+    let before: Vec<Vec<Vector3<f64>>> = names.iter().map(|n| nodes(env, n)).collect();
+    env.step(&[]);
+    names
         .iter()
-        .zip(after)
-        .map(|(a, b)| (b - a).norm() / dt)
+        .zip(&before)
+        .flat_map(|(n, b)| {
+            let after = nodes(env, n);
+            b.iter()
+                .zip(after)
+                .map(|(p, q)| (q - p).norm() / DT)
+                .collect::<Vec<_>>()
+        })
         .fold(0.0, f64::max)
+}
+
+/// The path of a scene file of the repository, as a target for the factory.
+fn target(file: &str) -> String {
+    root().join(file).to_string_lossy().into_owned()
 }
 
 /// Loads a scene file and resets it (seed 0, no autoreset).
 fn start(file: &str) -> Env {
-    let (desc, source) = modesuite::engine::scene::load_file(&root().join(file)).unwrap();
-    let mut app = modesuite::make::default_app();
-    let model = app.compile_scene(&desc, &source).unwrap();
-    app.spawn_scene(model).unwrap();
-    let mut env = Env::new(app);
+    let mut env = modesuite::make::env_for_target(&target(file), None).unwrap();
     env.autoreset = false;
     env.reset(Some(0));
     env
@@ -74,13 +84,7 @@ fn stacked_tori_rest_on_each_other_without_passing_through() {
         worst = worst.max(depth_inside(env, "upper", "lower"));
         worst = worst.max(depth_inside(env, "lower", "upper"));
     });
-    let before = (nodes(&mut env, "upper"), nodes(&mut env, "lower"));
-    env.step(&[]);
-    let speed = max_speed(&before.0, &nodes(&mut env, "upper"), DT).max(max_speed(
-        &before.1,
-        &nodes(&mut env, "lower"),
-        DT,
-    ));
+    let speed = rest_speed(&mut env, &["upper", "lower"]);
     let upper = nodes(&mut env, "upper");
     let lower = nodes(&mut env, "lower");
     let z = |n: &[Vector3<f64>]| n.iter().map(|p| p.z).sum::<f64>() / n.len() as f64;
@@ -118,13 +122,7 @@ fn cloth_drapes_over_a_torus_instead_of_falling_through() {
     run(&mut env, file, 3600, 30, |env, _| {
         worst = worst.max(depth_inside(env, "sheet", "torus"));
     });
-    let before = (nodes(&mut env, "sheet"), nodes(&mut env, "torus"));
-    env.step(&[]);
-    let speed = max_speed(&before.0, &nodes(&mut env, "sheet"), DT).max(max_speed(
-        &before.1,
-        &nodes(&mut env, "torus"),
-        DT,
-    ));
+    let speed = rest_speed(&mut env, &["sheet", "torus"]);
     // the cloth lies on the torus's tube: particles above the tube's centre line are held up
     let sheet = nodes(&mut env, "sheet");
     let held = sheet
@@ -162,13 +160,7 @@ fn two_cloths_fall_on_each_other_without_passing_through() {
             order = order.min(mean_z_in_middle(env, "upper") - mean_z_in_middle(env, "lower"));
         }
     });
-    let before = (nodes(&mut env, "upper"), nodes(&mut env, "lower"));
-    env.step(&[]);
-    let speed = max_speed(&before.0, &nodes(&mut env, "upper"), DT).max(max_speed(
-        &before.1,
-        &nodes(&mut env, "lower"),
-        DT,
-    ));
+    let speed = rest_speed(&mut env, &["upper", "lower"]);
     let depth = (0.004 - closest).max(0.0);
     println!(
         "two cloths, 60 s: closest approach {:.2} mm of the 4 mm required (penetration {:.2} mm <= 2 mm), upper above lower in the middle by >= {:.2} mm (> 0) from 2 s on, rest speed {:.2e} m/s (< 1e-2)",
@@ -182,18 +174,10 @@ fn two_cloths_fall_on_each_other_without_passing_through() {
     assert!(speed < 1e-2);
 }
 
-/// An app of a scene file (paths relative to the repository).
-fn app_of(file: &str) -> SimApp {
-    let (desc, source) = modesuite::engine::scene::load_file(&root().join(file)).unwrap();
-    let mut app = modesuite::make::default_app();
-    let model = app.compile_scene(&desc, &source).unwrap();
-    app.spawn_scene(model).unwrap();
-    app
-}
-
 /// State hashes of `n` envs of a scene after `steps` zero-action steps on `threads` threads.
 fn hashes(file: &str, n: usize, threads: usize, steps: usize) -> Vec<u64> {
-    let mut v = VecEnv::build(n, threads, |_| Ok::<_, String>(app_of(file))).unwrap();
+    let opts = modesuite::make::MakeOptions::default();
+    let mut v = modesuite::make::make_vec(&target(file), &opts, n, threads).unwrap();
     v.reset(Some(7));
     for _ in 0..steps {
         v.step(&[]).unwrap();
@@ -373,9 +357,7 @@ fn heavy_box_compresses_a_foam_block_as_linear_elasticity_predicts() {
         worst = worst.max(depth_in_box(&nodes(env, "foam"), &pose, h));
     });
     let (_, box_speed) = rigid(&mut env, "box");
-    let before = nodes(&mut env, "foam");
-    env.step(&[]);
-    let speed = max_speed(&before, &nodes(&mut env, "foam"), DT).max(box_speed);
+    let speed = rest_speed(&mut env, &["foam"]).max(box_speed);
     let top: Vec<f64> = nodes(&mut env, "foam")
         .iter()
         .map(|p| p.z)

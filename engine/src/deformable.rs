@@ -16,9 +16,7 @@ use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use crate::app::SimErrors;
 use crate::checkpoint::{Decoder, Encoder, Persist, StateError};
 use crate::components::{DeformableNodes, Object};
-use crate::contact::{
-    deliver, is_deformable_contact, ContactImpulses, ContactRefresh, DeformableContacts,
-};
+use crate::contact::{deliver, ContactImpulses, ContactRefresh, DeformableContacts};
 use crate::coupling::{ContactQuery, GripperState, Grippers, NoColliders, Reaction};
 use crate::rigid::{DeformableSystems, RigidContext};
 use crate::state::{mismatch, HashState, PluginStates, StateHasher, Stateful};
@@ -503,8 +501,8 @@ fn deformable_step<S: DeformableSolver>(
         }
     }
     if let Some(r) = rigid.as_deref_mut() {
-        let rigid_body = |re: &Reaction| re.body != u32::MAX && !is_deformable_contact(re.body);
-        for re in reactions.into_iter().filter(rigid_body) {
+        // (reactions on deformable surfaces were taken out by `after_step`)
+        for re in reactions.into_iter().filter(|re| re.body != u32::MAX) {
             r.push_reaction(re);
         }
     }

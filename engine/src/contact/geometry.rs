@@ -204,6 +204,11 @@ impl TriangleBvh {
         self.build(left + 1, mid, end);
     }
 
+    /// Whether nothing is built yet (or there are no triangles).
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
     /// The box of every triangle.
     pub fn bounds(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::EMPTY, |n| n.aabb)

@@ -174,6 +174,9 @@ struct Entry {
 
 impl Entry {
     fn refresh(&mut self, solver: &dyn DeformableSolver) {
+        // the hierarchy depends on the positions only: a body that has not moved since its last
+        // refresh (the substep's start after its own step) keeps it
+        let moved = self.pos.as_slice() != solver.node_positions() || self.bvh.is_empty();
         self.pos.clear();
         self.pos.extend_from_slice(solver.node_positions());
         self.vel.clear();
@@ -181,7 +184,7 @@ impl Entry {
             Some(v) if v.len() == self.pos.len() => self.vel.extend_from_slice(v),
             _ => self.vel.resize(self.pos.len(), Vector3::zeros()),
         }
-        if self.is_target {
+        if self.is_target && moved {
             let pad = self.surface.thickness;
             self.bvh.rebuild(&self.surface.triangles, &self.pos, pad);
         }
@@ -523,7 +526,7 @@ impl ContactQuery for SurfaceQuery<'_> {
 
 /// Whether `a` is the lighter of the pair by mean node mass (ties, masses equal up to rounding:
 /// the same body spawned at another pose, go to `a` when `a_later`).
-fn primary(a: &Entry, b: &Entry, a_later: bool) -> bool {
+fn lighter(a: &Entry, b: &Entry, a_later: bool) -> bool {
     let (ma, mb) = (a.node_mass, b.node_mass);
     let tie = (ma - mb).abs() <= 1e-9 * ma.max(mb);
     if tie {
@@ -537,20 +540,21 @@ fn primary(a: &Entry, b: &Entry, a_later: bool) -> bool {
 /// ways (each body's nodes against the other's triangles); see the module's coupling scheme.
 pub const MUTUAL_MASS_RATIO: f64 = 2.0;
 
-/// Which bodies of a pair resolve their contact: `(a resolves, b resolves)`. Both when their
-/// node masses are comparable and both take impulses; else the lighter one, or the one whose
-/// partner takes impulses; ties (masses equal up to rounding: the same body spawned at another
-/// pose) go to `a` when `a_later`.
-fn resolvers(a: &Entry, b: &Entry, a_later: bool) -> (bool, bool) {
+/// How a pair resolves its contact: `(a is the primary resolver, the other guards too)`. The
+/// primary is the lighter body, unless only the other takes impulses (the one resolving leaves
+/// the impulses to a body that takes them); the other guards when both take impulses and their
+/// node masses are comparable.
+fn roles(a: &Entry, b: &Entry, a_later: bool) -> (bool, bool) {
     let takes = |e: &Entry| !e.masses.is_empty();
     let (ma, mb) = (a.node_mass, b.node_mass);
-    let lighter_a = primary(a, b, a_later);
     match (takes(a), takes(b)) {
-        // the one resolving should leave the impulse to a body that takes it
-        (true, false) => (false, true),
+        (true, false) => (false, false),
         (false, true) => (true, false),
-        (true, true) if ma.max(mb) <= MUTUAL_MASS_RATIO * ma.min(mb) => (true, true),
-        _ => (lighter_a, !lighter_a),
+        (true, true) => (
+            lighter(a, b, a_later),
+            ma.max(mb) <= MUTUAL_MASS_RATIO * ma.min(mb),
+        ),
+        (false, false) => (lighter(a, b, a_later), false),
     }
 }
 
@@ -562,10 +566,10 @@ fn may_touch(a: &ContactSurface, b: &ContactSurface) -> bool {
 /// (rebuilding its list when bodies came or went).
 pub(crate) fn refresh_contacts(world: &mut World) {
     let mut q = world.query::<(Entity, &Object, &ContactSurface)>();
-    let mut bodies: Vec<(u32, Entity, ContactSurface)> = q
+    let mut bodies: Vec<(u32, Entity)> = q
         .iter(world)
         .filter(|(_, _, s)| s.collide)
-        .map(|(e, o, s)| (o.index, e, s.clone()))
+        .map(|(e, o, _)| (o.index, e))
         .collect();
     if bodies.len() < 2 {
         if let Some(mut c) = world.get_resource_mut::<DeformableContacts>() {
@@ -585,8 +589,11 @@ pub(crate) fn refresh_contacts(world: &mut World) {
             .all(|(e, b)| e.entity == b.1);
     if !same {
         contacts.entries.clear();
-        for (object, entity, surface) in bodies {
-            let Some(solver) = deformable_ref(world, entity) else {
+        for (object, entity) in bodies {
+            let (Some(solver), Some(surface)) = (
+                deformable_ref(world, entity),
+                world.get::<ContactSurface>(entity).cloned(),
+            ) else {
                 continue;
             };
             let masses = solver
@@ -620,18 +627,16 @@ pub(crate) fn refresh_contacts(world: &mut World) {
                 if !may_touch(&a.surface, &b.surface) {
                     continue;
                 }
-                let (j_resolves, i_resolves) = resolvers(b, a, true);
-                let primary_j = j_resolves && (!i_resolves || primary(b, a, true));
-                for (r, t, yes, first) in [
-                    (j, i, j_resolves, primary_j),
-                    (i, j, i_resolves, !primary_j),
-                ] {
-                    if yes {
-                        let thickness = contacts.entries[t].surface.thickness;
-                        let inset = if first { 0.0 } else { thickness.max(1e-3) };
-                        contacts.entries[r].targets.push(Target { index: t, inset });
-                        contacts.entries[t].is_target = true;
-                    }
+                let (j_primary, mutual) = roles(b, a, true);
+                let (p, o) = if j_primary { (j, i) } else { (i, j) };
+                let guard_inset = contacts.entries[p].surface.thickness.max(1e-3);
+                let mut resolve = |r: usize, t: usize, inset: f64| {
+                    contacts.entries[r].targets.push(Target { index: t, inset });
+                    contacts.entries[t].is_target = true;
+                };
+                resolve(p, o, 0.0);
+                if mutual {
+                    resolve(o, p, guard_inset);
                 }
             }
         }
