@@ -33,6 +33,7 @@ use modesuite_engine::prelude::*;
 use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
 
+mod fuzz;
 pub mod learn;
 mod record;
 
@@ -85,6 +86,9 @@ pub enum Command {
     Eval(learn::EvalArgs),
     /// Plot training curves (mean and standard deviation over run folders) into a PNG.
     Plot(learn::PlotArgs),
+    /// Fuzz the input parsers and loaders (scene, task, robot, URDF, actions, meshes, state
+    /// files) with mutated inputs; exit 1 if any input panicked, 3 if one hung.
+    Fuzz(fuzz::FuzzArgs),
     /// Run a benchmark suite: engine, fem, pbd, contact, robots, render, tasks.
     Bench {
         /// Suite name.
@@ -256,6 +260,7 @@ pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
         Some(Command::Train(args)) => learn::train(&args, out),
         Some(Command::Eval(args)) => learn::eval(&args, out),
         Some(Command::Plot(args)) => learn::plot(&args, out),
+        Some(Command::Fuzz(args)) => fuzz::fuzz(&args, out),
         Some(Command::Bench {
             name,
             json,

@@ -20,6 +20,7 @@ pub mod bench_contact;
 pub mod benches;
 pub mod cli;
 pub mod episode;
+pub mod fuzz;
 pub mod gym;
 pub mod learning;
 pub mod make;

@@ -323,7 +323,16 @@ pub(crate) fn observe_scene_terms(
     buffer.0.clear();
     let mut out = Vec::new();
     for o in &terms.observations {
-        match evaluate_into("observation", &o.name, o.term.as_ref(), &mut ctx, &mut out) {
+        let r = evaluate_into("observation", &o.name, o.term.as_ref(), &mut ctx, &mut out)
+            .and_then(|()| match out.iter().find(|x| !(**x as f32).is_finite()) {
+                Some(x) => Err(format!(
+                    "observation term \"{}\" = {x}: outside the f32 range of observations (|x| <= {:e})",
+                    o.name,
+                    f32::MAX
+                )),
+                None => Ok(()),
+            });
+        match r {
             Ok(()) => buffer.0.extend(out.iter().map(|&x| x as f32)),
             Err(e) => {
                 errors.raise(e);

@@ -48,7 +48,10 @@ mod tess;
 
 pub use desc::{Profile, ShapeDesc, SweepPath};
 pub use error::{ShapeError, MAX_ELEMENTS, MAX_MAGNITUDE};
-pub use files::{load_surface_file, load_volume_file, resolve_mesh_path, LoadedVolume};
+pub use files::{
+    load_surface_bytes, load_surface_file, load_volume_bytes, load_volume_file, resolve_mesh_path,
+    LoadedVolume,
+};
 pub use generate::VolumeLayout;
 pub use mesh::{
     dihedral_range_deg, signed_tet_volume, FaceCensus, MeshQuality, SurfaceMesh, VolumeMesh,

@@ -106,8 +106,8 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>, ShapeError> {
     std::fs::read(path).map_err(io)
 }
 
-fn read_text(path: &Path) -> Result<String, ShapeError> {
-    String::from_utf8(read_bytes(path)?).map_err(|e| ShapeError::Parse {
+fn text_of<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str, ShapeError> {
+    std::str::from_utf8(bytes).map_err(|e| ShapeError::Parse {
         path: path.to_path_buf(),
         line: 0,
         message: format!("not UTF-8 text: {e}"),
@@ -128,10 +128,19 @@ fn parse_error(path: &Path, line: usize, message: impl Into<String>) -> ShapeErr
 /// exactly equal vertices are welded and triangles that collapse to a line or point are dropped).
 /// Windings are kept as stored. The mesh is checked ([`SurfaceMesh::check`]).
 pub fn load_surface_file(path: &Path) -> Result<SurfaceMesh, ShapeError> {
+    if MeshFormat::from_path(path).is_none() {
+        return Err(unknown_extension(path));
+    }
+    load_surface_bytes(path, &read_bytes(path)?)
+}
+
+/// [`load_surface_file`] on a file's bytes already in memory; `path` names the file in errors
+/// and its extension gives the format.
+pub fn load_surface_bytes(path: &Path, bytes: &[u8]) -> Result<SurfaceMesh, ShapeError> {
     let mesh =
         match MeshFormat::from_path(path) {
-            Some(MeshFormat::Obj) => parse_obj(path, &read_text(path)?)?,
-            Some(MeshFormat::Stl) => parse_stl(path, &read_bytes(path)?)?,
+            Some(MeshFormat::Obj) => parse_obj(path, text_of(path, bytes)?)?,
+            Some(MeshFormat::Stl) => parse_stl(path, bytes)?,
             Some(MeshFormat::Msh | MeshFormat::Medit) => return Err(ShapeError::Unsupported {
                 shape: format!("mesh file '{}'", path.display()),
                 reason:
@@ -184,9 +193,18 @@ pub struct LoadedVolume {
 /// skipped). Unused nodes are dropped and negatively oriented tetrahedra flipped (both reported in
 /// [`LoadedVolume`]); degenerate tetrahedra are an error ([`VolumeMesh::check`]).
 pub fn load_volume_file(path: &Path) -> Result<LoadedVolume, ShapeError> {
+    match MeshFormat::from_path(path) {
+        Some(MeshFormat::Msh | MeshFormat::Medit) => load_volume_bytes(path, &read_bytes(path)?),
+        _ => load_volume_bytes(path, &[]),
+    }
+}
+
+/// [`load_volume_file`] on a file's bytes already in memory; `path` names the file in errors
+/// and its extension gives the format.
+pub fn load_volume_bytes(path: &Path, bytes: &[u8]) -> Result<LoadedVolume, ShapeError> {
     let (nodes, tets, quadratic_reduced) = match MeshFormat::from_path(path) {
-        Some(MeshFormat::Msh) => parse_msh(path, &read_text(path)?)?,
-        Some(MeshFormat::Medit) => parse_medit(path, &read_text(path)?)?,
+        Some(MeshFormat::Msh) => parse_msh(path, text_of(path, bytes)?)?,
+        Some(MeshFormat::Medit) => parse_medit(path, text_of(path, bytes)?)?,
         Some(MeshFormat::Obj | MeshFormat::Stl) => {
             return Err(ShapeError::NotImplemented {
                 what: format!(

@@ -250,7 +250,15 @@ pub(super) fn task_observe(
                         if let Some((lo, hi)) = t.clip {
                             x = x.clamp(lo, hi);
                         }
-                        frame.push(x as f32);
+                        let y = x as f32;
+                        if !y.is_finite() {
+                            return Err(format!(
+                                "task observation term \"{}\" = {x}: outside the f32 range of observations (|x| <= {:e}); give it a smaller scale or a clip",
+                                t.term.name,
+                                f32::MAX
+                            ));
+                        }
+                        frame.push(y);
                     }
                 }
                 Ok(frame)

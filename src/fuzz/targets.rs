@@ -1,0 +1,409 @@
+//! The fuzz targets: one per parser or loader that takes user input, each with its seed corpus
+//! from the shipped files. A target returns `Ok` when the input was accepted (and, for inputs
+//! that build an env, stepped), `Err` with the message when it was refused; panicking, hanging
+//! or returning a non-finite observation or reward to the caller is a defect.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use modesuite_engine::scene::{self, SceneSource};
+use modesuite_engine::shapes::{load_surface_bytes, load_volume_bytes};
+use modesuite_engine::Env;
+use modesuite_robots::urdf::{parse_urdf, AssetPaths};
+use modesuite_tasks::expert::{make_policy, PolicyKind};
+
+use crate::make::{default_app, override_actions, scenes_dir};
+
+/// One fuzz target.
+pub struct Target {
+    /// Name (`modesuite fuzz NAME`).
+    pub name: &'static str,
+    /// What it feeds the input to.
+    pub about: &'static str,
+    /// The seed corpus (shipped files and small meshes written for it).
+    pub seeds: fn() -> Vec<Vec<u8>>,
+    /// Runs one input.
+    pub run: fn(&[u8]) -> Result<(), String>,
+}
+
+/// Every target, in the order `modesuite fuzz all` runs them.
+pub const TARGETS: &[Target] = &[
+    Target {
+        name: "scene",
+        about: "scene files (RON): parse, compile, spawn with every default plugin, 4 random-action steps",
+        seeds: scene_seeds,
+        run: run_scene,
+    },
+    Target {
+        name: "task",
+        about: "task sections (RON) in the Franka Place scene: compile, spawn, 4 random-action steps",
+        seeds: task_seeds,
+        run: run_task,
+    },
+    Target {
+        name: "robot",
+        about: "robot description files (RON) used by a scene: load with their URDF, spawn, 4 steps",
+        seeds: robot_seeds,
+        run: run_robot,
+    },
+    Target {
+        name: "urdf",
+        about: "URDF text: parse and check",
+        seeds: urdf_seeds,
+        run: run_urdf,
+    },
+    Target {
+        name: "actions",
+        about: "action modes (`run --actions` RON) on the Franka Place scene: compile, spawn, 4 steps",
+        seeds: action_seeds,
+        run: run_actions,
+    },
+    Target {
+        name: "obj",
+        about: "Wavefront OBJ surfaces",
+        seeds: || vec![OBJ.as_bytes().to_vec()],
+        run: |b| surface("fuzz.obj", b),
+    },
+    Target {
+        name: "stl",
+        about: "STL surfaces, ASCII and binary",
+        seeds: || vec![STL_ASCII.as_bytes().to_vec(), stl_binary()],
+        run: |b| surface("fuzz.stl", b),
+    },
+    Target {
+        name: "msh",
+        about: "gmsh MSH 4.1 ASCII tetrahedral volumes",
+        seeds: || vec![MSH.as_bytes().to_vec()],
+        run: |b| volume("fuzz.msh", b),
+    },
+    Target {
+        name: "medit",
+        about: "medit .mesh tetrahedral volumes",
+        seeds: || vec![MEDIT.as_bytes().to_vec()],
+        run: |b| volume("fuzz.mesh", b),
+    },
+    Target {
+        name: "state",
+        about: "binary state files (`run --save-state`) loaded into the Franka Place env, then 4 steps",
+        seeds: state_seeds,
+        run: run_state,
+    },
+];
+
+/// The target of this name.
+pub fn target(name: &str) -> Option<&'static Target> {
+    TARGETS.iter().find(|t| t.name == name)
+}
+
+fn text(b: &[u8]) -> Result<&str, String> {
+    std::str::from_utf8(b).map_err(|e| format!("not UTF-8: {e}"))
+}
+
+fn read(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_default()
+}
+
+/// Files under `dir` (recursively) whose names end in `suffix`, sorted.
+fn files(dir: &Path, suffix: &str) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(rd) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.to_string_lossy().ends_with(suffix) {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+fn assets_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
+}
+
+/// A private folder holding every shipped task file (so any scene's `extends` resolves) and
+/// the robot URDFs (for robot description inputs), made once per process.
+fn workdir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("modesuite-fuzz-{}", std::process::id()));
+        let _ = std::fs::create_dir_all(&dir);
+        for f in files(&scenes_dir(), ".task.ron")
+            .into_iter()
+            .chain(files(&assets_dir().join("robots"), ".urdf"))
+        {
+            if let Some(name) = f.file_name() {
+                let _ = std::fs::copy(&f, dir.join(name));
+            }
+        }
+        dir
+    })
+}
+
+/// Steps an env 4 times with uniform random actions; a non-finite observation or reward
+/// returned to the caller is a defect (reported as a panic so the campaign counts it).
+fn exercise(mut env: Env) -> Result<(), String> {
+    let mut policy = make_policy(PolicyKind::Random, &env)?;
+    let (obs, _) = env.reset(Some(3));
+    assert_finite("reset observation", &obs);
+    policy.reset(3);
+    let mut action = vec![0.0f32; env.spaces().action.flat_dim()];
+    for _ in 0..4 {
+        policy.act(&env, &mut action)?;
+        let out = env.step(&action);
+        assert_finite("observation", &out.observation);
+        assert!(out.reward.is_finite(), "non-finite reward {}", out.reward);
+    }
+    Ok(())
+}
+
+fn assert_finite(what: &str, v: &[f32]) {
+    if let Some((i, x)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+        panic!("{what}[{i}] = {x} returned to the caller");
+    }
+}
+
+/// Compiles and spawns scene text read from `file` (a name in the work folder), then steps it.
+fn scene_env(text: &str, file: &Path) -> Result<(), String> {
+    let desc = scene::parse_str(text, &file.display().to_string()).map_err(|e| e.to_string())?;
+    let source = SceneSource {
+        file: Some(file.to_path_buf()),
+        base_dir: file.parent().map(Path::to_path_buf).unwrap_or_default(),
+        asset_roots: scene::default_asset_roots(),
+        text: Some(text.to_string()),
+    };
+    let mut app = default_app();
+    let model = app
+        .compile_scene(&desc, &source)
+        .map_err(|e| e.to_string())?;
+    app.spawn_scene(model).map_err(|e| e.to_string())?;
+    exercise(Env::new(app))
+}
+
+fn scene_seeds() -> Vec<Vec<u8>> {
+    files(&scenes_dir(), ".scene.ron")
+        .iter()
+        .map(|p| read(p))
+        .collect()
+}
+
+fn run_scene(b: &[u8]) -> Result<(), String> {
+    scene_env(text(b)?, &workdir().join("fuzz.scene.ron"))
+}
+
+/// The Franka Place scene with its task section cut out: (text before, text after).
+fn place_scene_around_task() -> &'static (String, String) {
+    static PARTS: OnceLock<(String, String)> = OnceLock::new();
+    PARTS.get_or_init(|| {
+        let s = String::from_utf8(read(&scenes_dir().join("place/franka.scene.ron")))
+            .unwrap_or_default();
+        let key = "\"task\":";
+        let Some(k) = s.find(key) else {
+            return (s, String::new());
+        };
+        let open = k + key.len();
+        let mut depth = 0i32;
+        let mut end = s.len();
+        for (i, c) in s[open..].char_indices() {
+            match c {
+                '(' => depth += 1,
+                ')' => {
+                    depth -= 1;
+                    if depth == 0 {
+                        end = open + i + 1;
+                        break;
+                    }
+                }
+                _ => {}
+            }
+        }
+        (s[..open].to_string(), s[end..].to_string())
+    })
+}
+
+fn task_seeds() -> Vec<Vec<u8>> {
+    let (before, after) = place_scene_around_task();
+    let full =
+        String::from_utf8(read(&scenes_dir().join("place/franka.scene.ron"))).unwrap_or_default();
+    let own = full
+        .strip_prefix(before.as_str())
+        .and_then(|r| r.strip_suffix(after.as_str()))
+        .unwrap_or_default()
+        .to_string();
+    std::iter::once(own.into_bytes())
+        .chain(files(&scenes_dir(), ".task.ron").iter().map(|p| read(p)))
+        .collect()
+}
+
+fn run_task(b: &[u8]) -> Result<(), String> {
+    let (before, after) = place_scene_around_task();
+    let text = format!("{before} {} {after}", text(b)?);
+    scene_env(&text, &workdir().join("fuzz.scene.ron"))
+}
+
+fn robot_seeds() -> Vec<Vec<u8>> {
+    files(&assets_dir().join("robots"), ".robot.ron")
+        .iter()
+        .map(|p| read(p))
+        .collect()
+}
+
+/// The pedestal example scene with its robot model pointing at `model`.
+fn run_robot(b: &[u8]) -> Result<(), String> {
+    let dir = workdir();
+    // One file per thread, so parallel tests do not share it.
+    let file = dir
+        .join(format!("fuzz-{:?}.robot.ron", std::thread::current().id()).replace(['(', ')'], ""));
+    std::fs::write(&file, b).map_err(|e| format!("work file: {e}"))?;
+    let scene_text = String::from_utf8(read(
+        &scenes_dir().join("examples/franka_pedestal.scene.ron"),
+    ))
+    .unwrap_or_default()
+    .replace(
+        "\"../../assets/robots/franka_pedestal/franka_pedestal.robot.ron\"",
+        &format!("{:?}", file.display().to_string()),
+    );
+    let desc = scene::parse_str(&scene_text, "fuzz.scene.ron").map_err(|e| e.to_string())?;
+    let mut source = SceneSource::in_memory(dir);
+    source.asset_roots = scene::default_asset_roots();
+    source.asset_roots.push(dir.to_path_buf());
+    let mut app = default_app();
+    let model = app
+        .compile_scene(&desc, &source)
+        .map_err(|e| e.to_string())?;
+    app.spawn_scene(model).map_err(|e| e.to_string())?;
+    exercise(Env::new(app))
+}
+
+fn urdf_seeds() -> Vec<Vec<u8>> {
+    files(&assets_dir().join("robots"), ".urdf")
+        .iter()
+        .map(|p| read(p))
+        .collect()
+}
+
+fn run_urdf(b: &[u8]) -> Result<(), String> {
+    let dir = workdir();
+    parse_urdf(text(b)?, "fuzz.urdf", dir, &AssetPaths::new(dir))
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+}
+
+fn action_seeds() -> Vec<Vec<u8>> {
+    [
+        "(base: Velocity, arm: EePoseDelta, gripper: Binary)",
+        "(base: Velocity, arm: JointDelta, gripper: Off)",
+        "(base: Discrete, arm: EePoseDelta, gripper: Binary)",
+        "(arm: JointPosition, gripper: Off)",
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .collect()
+}
+
+fn run_actions(b: &[u8]) -> Result<(), String> {
+    let file = scenes_dir().join("place/franka.scene.ron");
+    let (mut desc, source) = scene::load_file(&file).map_err(|e| e.to_string())?;
+    override_actions(&mut desc, text(b)?).map_err(|e| e.to_string())?;
+    let mut app = default_app();
+    let model = app
+        .compile_scene(&desc, &source)
+        .map_err(|e| e.to_string())?;
+    app.spawn_scene(model).map_err(|e| e.to_string())?;
+    exercise(Env::new(app))
+}
+
+fn surface(label: &str, b: &[u8]) -> Result<(), String> {
+    load_surface_bytes(Path::new(label), b)
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+}
+
+fn volume(label: &str, b: &[u8]) -> Result<(), String> {
+    let v = load_volume_bytes(Path::new(label), b).map_err(|e| e.to_string())?;
+    let _ = v.mesh.boundary_surface_compact();
+    Ok(())
+}
+
+/// A Franka Place env, fresh for every input.
+fn place_env() -> Result<Env, String> {
+    let file = scenes_dir().join("place/franka.scene.ron");
+    let (desc, source) = scene::load_file(&file).map_err(|e| e.to_string())?;
+    let mut app = default_app();
+    let model = app
+        .compile_scene(&desc, &source)
+        .map_err(|e| e.to_string())?;
+    app.spawn_scene(model).map_err(|e| e.to_string())?;
+    Ok(Env::new(app))
+}
+
+fn state_seeds() -> Vec<Vec<u8>> {
+    let Ok(mut env) = place_env() else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    env.reset(Some(5));
+    out.extend(env.save_state().ok());
+    let action = vec![0.1f32; env.spaces().action.flat_dim()];
+    for _ in 0..10 {
+        env.step(&action);
+    }
+    out.extend(env.save_state().ok());
+    out
+}
+
+fn run_state(b: &[u8]) -> Result<(), String> {
+    let mut env = place_env()?;
+    env.load_state(b).map_err(|e| e.to_string())?;
+    let action = vec![0.0f32; env.spaces().action.flat_dim()];
+    for _ in 0..4 {
+        let out = env.step(&action);
+        assert_finite("observation", &out.observation);
+    }
+    Ok(())
+}
+
+const OBJ: &str = "# a unit tetrahedron and a quad\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 1 0\n\
+vt 0 0\nvn 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\nf 2/1 5/1 3/1\nf -1 -2 -3\n";
+
+const STL_ASCII: &str = "solid t\nfacet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 1 0\n\
+vertex 1 0 0\nendloop\nendfacet\nfacet normal 0 -1 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n\
+vertex 0 0 1\nendloop\nendfacet\nfacet normal -1 0 0\nouter loop\nvertex 0 0 0\nvertex 0 0 1\n\
+vertex 0 1 0\nendloop\nendfacet\nfacet normal 1 1 1\nouter loop\nvertex 1 0 0\nvertex 0 1 0\n\
+vertex 0 0 1\nendloop\nendfacet\nendsolid t\n";
+
+/// The ASCII STL's four triangles in the binary layout.
+fn stl_binary() -> Vec<u8> {
+    let tris: [[[f32; 3]; 3]; 4] = [
+        [[0., 0., 0.], [0., 1., 0.], [1., 0., 0.]],
+        [[0., 0., 0.], [1., 0., 0.], [0., 0., 1.]],
+        [[0., 0., 0.], [0., 0., 1.], [0., 1., 0.]],
+        [[1., 0., 0.], [0., 1., 0.], [0., 0., 1.]],
+    ];
+    let mut b = vec![0u8; 80];
+    b.extend((tris.len() as u32).to_le_bytes());
+    for t in tris {
+        b.extend([0u8; 12]);
+        for v in t {
+            for c in v {
+                b.extend(c.to_le_bytes());
+            }
+        }
+        b.extend([0u8; 2]);
+    }
+    b
+}
+
+const MSH: &str = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 5 1 5\n3 1 0 5\n1\n2\n3\n4\n5\n\
+0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n$EndNodes\n$Elements\n2 3 1 3\n2 1 2 1\n6 1 2 3\n3 1 4 2\n\
+1 1 2 3 4\n2 2 3 4 5\n$EndElements\n";
+
+const MEDIT: &str = "MeshVersionFormatted 2\nDimension\n3\nVertices\n5\n0 0 0 1\n1 0 0 1\n\
+0 1 0 1\n0 0 1 1\n1 1 1 1\nTriangles\n1\n1 2 3 1\nTetrahedra\n2\n1 2 3 4 1\n2 3 4 5 1\nEnd\n";
