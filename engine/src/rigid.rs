@@ -401,21 +401,37 @@ impl RigidContext {
                 .map_or_else(Isometry3::identity, |b| pose_from_rapier(b.position()));
             self.step_start.push(pose);
         }
-        self.pipeline.step(
-            vec_to_rapier(&self.gravity),
-            &self.params,
-            &mut self.islands,
-            &mut self.broad_phase,
-            &mut self.narrow_phase,
-            &mut self.bodies,
-            &mut self.colliders,
-            &mut self.impulse_joints,
-            &mut self.multibody_joints,
-            &mut self.soft_bodies,
-            &mut self.ccd,
-            &(),
-            &(),
-        );
+        // rapier asserts its sets' internal consistency; sets that are not consistent (a state
+        // file edited by hand and re-sealed) must end the episode with a reason, not the process.
+        let stepped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            self.pipeline.step(
+                vec_to_rapier(&self.gravity),
+                &self.params,
+                &mut self.islands,
+                &mut self.broad_phase,
+                &mut self.narrow_phase,
+                &mut self.bodies,
+                &mut self.colliders,
+                &mut self.impulse_joints,
+                &mut self.multibody_joints,
+                &mut self.soft_bodies,
+                &mut self.ccd,
+                &(),
+                &(),
+            )
+        }));
+        if let Err(p) = stepped {
+            let why = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_default();
+            self.pipeline = PhysicsPipeline::new();
+            self.queries_stale = true;
+            return Err(format!(
+                "rigid physics failed: the rigid solver stopped on an inconsistent world ({why}); was the state loaded from a damaged file?"
+            ));
+        }
         for (h, force, torque) in touched {
             if let Some(b) = self.bodies.get_mut(h) {
                 b.reset_forces(false);

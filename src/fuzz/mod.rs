@@ -226,13 +226,15 @@ thread_local! {
 }
 
 /// Installs, once per process, a panic hook that is silent on threads running a campaign's
-/// input and otherwise does what the previous hook did.
+/// input (unless `MODESUITE_FUZZ_LOUD` is set, to see where an input panics) and otherwise does
+/// what the previous hook did.
 fn quiet_panics_in_campaigns() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         let previous = std::panic::take_hook();
+        let loud = std::env::var_os("MODESUITE_FUZZ_LOUD").is_some();
         std::panic::set_hook(Box::new(move |info| {
-            if !IN_CAMPAIGN.with(|f| f.get()) {
+            if loud || !IN_CAMPAIGN.with(|f| f.get()) {
                 previous(info);
             }
         }));

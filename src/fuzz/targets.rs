@@ -12,7 +12,7 @@ use modesuite_engine::Env;
 use modesuite_robots::urdf::{parse_urdf, AssetPaths};
 use modesuite_tasks::expert::{make_policy, PolicyKind};
 
-use crate::make::{default_app, override_actions, scenes_dir};
+use crate::make::{default_app, env_for_target, override_actions, scenes_dir};
 
 /// One fuzz target.
 pub struct Target {
@@ -84,9 +84,15 @@ pub const TARGETS: &[Target] = &[
     },
     Target {
         name: "state",
-        about: "binary state files (`run --save-state`) loaded into the Franka Place env, then 4 steps",
+        about: "binary state files (`run --save-state`) of Franka Place, Bend and Uncover, loaded and stepped 4 times",
         seeds: state_seeds,
         run: run_state,
+    },
+    Target {
+        name: "state_body",
+        about: "state file bodies re-sealed with a valid checksum (a careless tool's edits), loaded and stepped 4 times",
+        seeds: state_body_seeds,
+        run: run_state_body,
     },
 ];
 
@@ -332,42 +338,93 @@ fn volume(label: &str, b: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// A Franka Place env, fresh for every input.
-fn place_env() -> Result<Env, String> {
-    let file = scenes_dir().join("place/franka.scene.ron");
-    let (desc, source) = scene::load_file(&file).map_err(|e| e.to_string())?;
-    let mut app = default_app();
-    let model = app
-        .compile_scene(&desc, &source)
-        .map_err(|e| e.to_string())?;
-    app.spawn_scene(model).map_err(|e| e.to_string())?;
-    Ok(Env::new(app))
+/// The tasks state inputs are loaded into: a rigid-and-FEM task, an FEM rod task and a cloth
+/// task, so every solver's part of a state file is decoded.
+const STATE_TASKS: &[&str] = &[
+    "MoDe-Franka-Place-v0",
+    "MoDe-Franka-Bend-v0",
+    "MoDe-Franka-Uncover-v0",
+];
+
+fn task_env(id: &str) -> Result<Env, String> {
+    env_for_target(id, None).map_err(|e| e.to_string())
+}
+
+/// The fingerprint of each of [`STATE_TASKS`]' envs (computed once).
+fn state_fingerprints() -> &'static [(u64, &'static str)] {
+    static F: OnceLock<Vec<(u64, &'static str)>> = OnceLock::new();
+    F.get_or_init(|| {
+        STATE_TASKS
+            .iter()
+            .filter_map(|id| task_env(id).ok().map(|e| (e.fingerprint(), *id)))
+            .collect()
+    })
 }
 
 fn state_seeds() -> Vec<Vec<u8>> {
-    let Ok(mut env) = place_env() else {
-        return Vec::new();
-    };
     let mut out = Vec::new();
-    env.reset(Some(5));
-    out.extend(env.save_state().ok());
-    let action = vec![0.1f32; env.spaces().action.flat_dim()];
-    for _ in 0..10 {
-        env.step(&action);
+    for id in STATE_TASKS {
+        let Ok(mut env) = task_env(id) else {
+            continue;
+        };
+        env.reset(Some(5));
+        out.extend(env.save_state().ok());
+        let action = vec![0.1f32; env.spaces().action.flat_dim()];
+        for _ in 0..10 {
+            env.step(&action);
+        }
+        out.extend(env.save_state().ok());
     }
-    out.extend(env.save_state().ok());
     out
 }
 
+/// Loads a state file into a fresh env of the task whose fingerprint its header names (Franka
+/// Place when none does: the load must then refuse it) and steps it 4 times.
 fn run_state(b: &[u8]) -> Result<(), String> {
-    let mut env = place_env()?;
+    let id = modesuite_engine::checkpoint::read_header(b)
+        .ok()
+        .and_then(|h| {
+            state_fingerprints()
+                .iter()
+                .find(|(f, _)| *f == h.fingerprint)
+                .map(|(_, id)| *id)
+        })
+        .unwrap_or(STATE_TASKS[0]);
+    let mut env = task_env(id)?;
     env.load_state(b).map_err(|e| e.to_string())?;
     let action = vec![0.0f32; env.spaces().action.flat_dim()];
     for _ in 0..4 {
         let out = env.step(&action);
         assert_finite("observation", &out.observation);
+        assert!(out.reward.is_finite(), "non-finite reward {}", out.reward);
     }
     Ok(())
+}
+
+/// Length of a state file's magic and version.
+const STATE_PREFIX: usize = modesuite_engine::checkpoint::MAGIC.len() + 4;
+
+fn state_body_seeds() -> Vec<Vec<u8>> {
+    state_seeds()
+        .into_iter()
+        .filter(|b| b.len() > STATE_PREFIX + 8)
+        .map(|b| b[STATE_PREFIX..b.len() - 8].to_vec())
+        .collect()
+}
+
+/// A state file around `body`: magic, version, body and the checksum the loader checks.
+fn sealed(body: &[u8]) -> Vec<u8> {
+    let mut out = modesuite_engine::checkpoint::MAGIC.to_vec();
+    out.extend(modesuite_engine::checkpoint::FORMAT_VERSION.to_le_bytes());
+    out.extend_from_slice(body);
+    let mut h = modesuite_engine::state::StateHasher::default();
+    h.write_bytes(&out);
+    out.extend(h.finish().to_le_bytes());
+    out
+}
+
+fn run_state_body(b: &[u8]) -> Result<(), String> {
+    run_state(&sealed(b))
 }
 
 const OBJ: &str = "# a unit tetrahedron and a quad\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 1 0\n\

@@ -17,6 +17,9 @@ use modesuite_engine::RigidContext;
 use crate::error::RobotError;
 use crate::robot::Robot;
 
+/// Largest IK target coordinate accepted, m (world frame).
+pub const MAX_IK_COORDINATE: f64 = 1e5;
+
 /// Options of [`solve_ik`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IkOptions {
@@ -104,6 +107,18 @@ pub fn solve_ik(
     {
         return Err(invalid("IK target not finite".into()));
     }
+    // rapier's IK runs in f32 and its SVD does not return on non-finite entries: a target far
+    // beyond any workspace (1e308 is finite in f64, infinite in f32) would never come back.
+    if let Some(x) = target
+        .translation
+        .vector
+        .iter()
+        .find(|v| v.abs() > MAX_IK_COORDINATE)
+    {
+        return Err(invalid(format!(
+            "IK target coordinate {x} m is beyond +-{MAX_IK_COORDINATE:e} m (a robot's reach is a few metres)"
+        )));
+    }
     if !(options.damping.is_finite() && options.damping >= 0.0) {
         return Err(invalid(format!("IK damping {} invalid", options.damping)));
     }
@@ -113,6 +128,11 @@ pub fn solve_ik(
         }
     }
     let current = robot.joint_positions(ctx)?;
+    if current.iter().any(|q| !q.is_finite()) {
+        return Err(invalid(
+            "the robot's joint positions are not finite (the physics blew up)".into(),
+        ));
+    }
     let start = match seed {
         Some(s) if s.len() == current.len() && s.iter().all(|v| v.is_finite()) => s.to_vec(),
         Some(s) => {

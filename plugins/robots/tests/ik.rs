@@ -71,3 +71,18 @@ fn spot_arm_ik_reaches_random_targets() {
     let rate = ik_accuracy("spot", 1.0, 11);
     assert!(rate >= 0.95, "success rate {rate}");
 }
+
+/// A target beyond any workspace (finite in f64, infinite in f32, where rapier's IK and its SVD
+/// run) is refused instead of looping forever (found by `modesuite fuzz scene`).
+#[test]
+fn targets_beyond_f32_are_refused_not_hung() {
+    let (ctx, spec, robot) = common::spawn("franka");
+    let arm = spec.indices(&robot, &spec.arm_joints).unwrap();
+    let ee = robot.frame_index(&spec.ee_frame).unwrap();
+    let home = robot.joint_positions(&ctx).unwrap();
+    let mut target = forward_kinematics(&robot, &ctx, ee, &home).unwrap();
+    target.translation.vector.z = -1e308;
+    let e = solve_ik(&robot, &ctx, ee, &target, &arm, None, &IkOptions::default())
+        .expect_err("refused");
+    assert!(e.to_string().contains("beyond"), "{e}");
+}

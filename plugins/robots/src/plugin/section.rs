@@ -289,12 +289,14 @@ fn check_script(path: &str, s: &Script) -> Result<(), SceneError> {
         ));
     }
     if !sorted(s.ee.iter().map(|e| e.t).collect())
-        || s.ee.iter().any(|e| e.pos.iter().any(|x| !x.is_finite()))
+        || s.ee
+            .iter()
+            .any(|e| e.pos.iter().any(|x| !(x.is_finite() && x.abs() <= 100.0)))
     {
         return Err(SceneError::semantic(
             format!("{path}.script.ee"),
             format!("{:?}", s.ee),
-            "waypoints sorted by finite t with finite positions",
+            "waypoints sorted by finite t with positions within 100 m of the base (base frame, m)",
         ));
     }
     if !sorted(s.gripper.iter().map(|g| g.t).collect()) {
