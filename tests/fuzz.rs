@@ -71,3 +71,18 @@ fn fuzz_actions() {
 fn fuzz_state() {
     tier("state", 2000);
 }
+
+#[test]
+fn fuzz_state_body() {
+    tier("state_body", 2000);
+}
+
+#[test]
+fn fuzz_generated_scenes() {
+    tier("generated", 24);
+}
+
+#[test]
+fn fuzz_tasks_random_and_bang_bang_actions() {
+    tier("tasks", 4);
+}

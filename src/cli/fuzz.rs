@@ -30,6 +30,10 @@ pub struct FuzzArgs {
     /// Folder failing inputs are written to (`DIR/<target>/panic-N`, `hang-N`).
     #[arg(long, default_value = "fuzz/out")]
     pub out: PathBuf,
+    /// Print the scene the `generated` target makes from this seed (a failing input's first 8
+    /// bytes, little-endian) and exit.
+    #[arg(long)]
+    pub show_generated: Option<u64>,
     /// List the targets and exit.
     #[arg(long)]
     pub list: bool,
@@ -53,6 +57,10 @@ fn seconds(flag: &str, s: f64) -> Result<Duration, CliError> {
 
 /// Runs `fuzz`; exit code 1 when any target panicked.
 pub(super) fn fuzz(args: &FuzzArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    if let Some(seed) = args.show_generated {
+        write!(out, "{}", crate::fuzz::generated::random_scene(seed)).map_err(io)?;
+        return Ok(());
+    }
     if args.list {
         for t in TARGETS {
             writeln!(out, "{:<8} {}", t.name, t.about).map_err(io)?;

@@ -13,6 +13,7 @@
 //! This is structure-aware mutation on the stable toolchain, without coverage feedback; see
 //! `docs/reliability.md` for what it found and how to run longer campaigns.
 
+pub mod generated;
 pub mod mutate;
 pub mod targets;
 

@@ -94,6 +94,18 @@ pub const TARGETS: &[Target] = &[
         seeds: state_body_seeds,
         run: run_state_body,
     },
+    Target {
+        name: "generated",
+        about: "random valid scenes (every shape generator; rigid, FEM and cloth bodies) from the input's seed, 20 steps",
+        seeds: || (0u64..8).map(|k| k.to_le_bytes().to_vec()).collect(),
+        run: run_generated,
+    },
+    Target {
+        name: "tasks",
+        about: "the 16 tasks under random and bang-bang actions from the input's seed, 30 steps each way",
+        seeds: || (0u64..2).map(|k| k.to_le_bytes().to_vec()).collect(),
+        run: run_tasks,
+    },
 ];
 
 /// The target of this name.
@@ -401,6 +413,109 @@ fn run_state(b: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
+/// The seed an input stands for (its first 8 bytes, little-endian, zero-padded).
+fn seed_of(b: &[u8]) -> u64 {
+    let mut w = [0u8; 8];
+    for (d, s) in w.iter_mut().zip(b) {
+        *d = *s;
+    }
+    u64::from_le_bytes(w)
+}
+
+/// An episode error must say which object or body failed (a quoted name).
+fn check_error_names_object(info: &modesuite_engine::EnvInfo) {
+    if let Some(e) = &info.error {
+        assert!(e.contains('"'), "an episode error names no object: {e}");
+    }
+}
+
+/// Steps of each generated scene.
+const GENERATED_STEPS: usize = 20;
+
+fn run_generated(b: &[u8]) -> Result<(), String> {
+    let text = super::generated::random_scene(seed_of(b));
+    let mut env = crate::make::env_from_text(&text).map_err(|e| e.to_string())?;
+    let (obs, _) = env.reset(Some(seed_of(b)));
+    assert_finite("reset observation", &obs);
+    let action = vec![0.0f32; env.spaces().action.flat_dim()];
+    for _ in 0..GENERATED_STEPS {
+        let out = env.step(&action);
+        assert_finite("observation", &out.observation);
+        assert!(out.reward.is_finite(), "non-finite reward {}", out.reward);
+        check_error_names_object(&out.info);
+    }
+    Ok(())
+}
+
+/// Every task id.
+fn task_ids() -> Vec<String> {
+    let mut ids = Vec::new();
+    for t in files(&scenes_dir(), ".scene.ron") {
+        let Some(task) = t.parent().and_then(|p| p.file_name()) else {
+            continue;
+        };
+        let Some(robot) = t
+            .file_name()
+            .and_then(|f| f.to_str()?.strip_suffix(".scene.ron"))
+        else {
+            continue;
+        };
+        if task == "examples" {
+            continue;
+        }
+        let cap = |s: &str| {
+            let mut c = s.chars();
+            c.next()
+                .map(|f| f.to_uppercase().chain(c).collect::<String>())
+                .unwrap_or_default()
+        };
+        ids.push(format!(
+            "MoDe-{}-{}-v0",
+            cap(robot),
+            cap(&task.to_string_lossy())
+        ));
+    }
+    ids
+}
+
+fn run_tasks(b: &[u8]) -> Result<(), String> {
+    let seed = seed_of(b);
+    for id in task_ids() {
+        let mut env = task_env(&id)?;
+        let mut policy = make_policy(PolicyKind::Random, &env)?;
+        let (obs, _) = env.reset(Some(seed));
+        assert_finite("reset observation", &obs);
+        policy.reset(seed);
+        let space = env.spaces().action;
+        let dim = space.flat_dim();
+        let mut action = vec![0.0f32; dim];
+        for k in 0..60 {
+            if k < 30 {
+                policy.act(&env, &mut action)?;
+            } else if let modesuite_engine::Space::Box { low, high, .. } = &space {
+                // bang-bang: every value at a bound, switching every few steps
+                for (i, a) in action.iter_mut().enumerate() {
+                    let up = (k / 3 + i) % 2 == 0;
+                    *a = if up {
+                        high[i].min(1.0)
+                    } else {
+                        low[i].max(-1.0)
+                    };
+                }
+            }
+            let out = env.step(&action);
+            assert_finite(&format!("{id} observation"), &out.observation);
+            assert!(
+                out.reward.is_finite(),
+                "{id}: non-finite reward {}",
+                out.reward
+            );
+            check_error_names_object(&out.info);
+        }
+    }
+    Ok(())
+}
+
 /// Length of a state file's magic and version.
 const STATE_PREFIX: usize = modesuite_engine::checkpoint::MAGIC.len() + 4;
 
@@ -464,3 +579,13 @@ const MSH: &str = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 5 1 5\n3 1 0 
 
 const MEDIT: &str = "MeshVersionFormatted 2\nDimension\n3\nVertices\n5\n0 0 0 1\n1 0 0 1\n\
 0 1 0 1\n0 0 1 1\n1 1 1 1\nTriangles\n1\n1 2 3 1\nTetrahedra\n2\n1 2 3 4 1\n2 3 4 5 1\nEnd\n";
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn sixteen_task_ids() {
+        let ids = super::task_ids();
+        assert_eq!(ids.len(), 16, "{ids:?}");
+        assert!(ids.contains(&"MoDe-Spot-Curtain-v0".to_string()));
+    }
+}
