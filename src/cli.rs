@@ -793,8 +793,8 @@ fn dump_final(
     v["episode_length"] = json!(length);
     let text =
         serde_json::to_string_pretty(&v).map_err(|e| CliError::runtime(format!("dump: {e}")))?;
-    std::fs::write(path, text)
-        .map_err(|e| CliError::runtime(format!("{}: cannot write: {e}", path.display())))
+    modesuite_engine::fsio::write_atomic(path, text.as_bytes())
+        .map_err(|e| CliError::runtime(format!("{}: {e}", path.display())))
 }
 
 fn bench(

@@ -18,7 +18,7 @@ use modesuite_learn::{
 use serde_json::json;
 
 use crate::gym::layout::{ActLayout, ObsLayout};
-use crate::make::{self, MakeOptions};
+use crate::make::{self, MakeError, MakeOptions};
 
 /// Seed of the first evaluation episode when `eval` is not given one: far from the seeds
 /// training resets with (the training seed plus the env index).
@@ -272,19 +272,22 @@ pub struct TrainOutcome {
     pub env_seconds: f64,
 }
 
-/// Trains (or resumes) a run; `progress` receives each iteration's metrics.
+/// Trains (or resumes) a run; `progress` receives each iteration's metrics. Errors are
+/// [`MakeError::Input`] for what the user can fix in the request (configuration, another run's
+/// folder) and [`MakeError::Runtime`] for failures while running (a full disk, a diverged
+/// loss, an env breaking its contract).
 pub fn train(
     req: &TrainRequest,
     mut progress: impl FnMut(&Metrics),
-) -> Result<TrainOutcome, String> {
-    let (cfg, _) = resolve_config(req)?;
+) -> Result<TrainOutcome, MakeError> {
+    let (cfg, _) = resolve_config(req).map_err(MakeError::Input)?;
     let opts = MakeOptions {
         actions: req.actions.clone(),
         ..MakeOptions::default()
     };
-    let vec = make::make_vec(&req.target, &opts, req.envs.max(1), req.threads)
-        .map_err(|e| e.to_string())?;
-    let mut env = SimEnv::new(vec, &req.target, req.actions.as_deref())?;
+    let vec = make::make_vec(&req.target, &opts, req.envs.max(1), req.threads)?;
+    let mut env =
+        SimEnv::new(vec, &req.target, req.actions.as_deref()).map_err(MakeError::Input)?;
     let note = json!({"target": req.target, "actions": req.actions, "algo": req.algo,
                       "envs": req.envs, "command": req.command})
     .to_string();
@@ -304,11 +307,16 @@ pub fn train(
     let start = std::time::Instant::now();
     let summary =
         modesuite_learn::train(&cfg, &mut env, &run, &mut observer).map_err(|e| match e {
-            LearnError::Incompatible(m) => format!(
+            LearnError::Incompatible(m) => MakeError::Input(format!(
                 "{}: holds another run ({m}); choose another --out or the same settings",
                 req.out.display()
-            ),
-            other => other.to_string(),
+            )),
+            e @ (LearnError::Config(_) | LearnError::Checkpoint(_)) => {
+                MakeError::Input(e.to_string())
+            }
+            e @ (LearnError::Io(_) | LearnError::Env(_) | LearnError::Diverged(_)) => {
+                MakeError::Runtime(e.to_string())
+            }
         })?;
     Ok(TrainOutcome {
         summary,

@@ -8,6 +8,8 @@
 use std::path::{Path, PathBuf};
 
 use modesuite_learn::{read_metrics, Metrics};
+
+use crate::make::MakeError;
 use plotters::prelude::*;
 
 /// One curve over a shared grid of env steps: mean and standard deviation over runs.
@@ -83,22 +85,25 @@ const W: u32 = 1200;
 const H: u32 = 480;
 
 /// Draws the return and success curves of the runs in `dirs` into `out` (PNG), titled
-/// `title`; written atomically.
-pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), String> {
+/// `title`; written atomically. Errors: [`MakeError::Input`] for run folders without usable
+/// metrics, [`MakeError::Runtime`] when drawing or writing fails.
+pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), MakeError> {
     if dirs.is_empty() {
-        return Err("plot: give at least one run folder".into());
+        return Err(MakeError::Input(
+            "plot: give at least one run folder".into(),
+        ));
     }
-    let runs = load_runs(dirs)?;
+    let runs = load_runs(dirs).map_err(MakeError::Input)?;
     let ret = curve(&runs, |m| m.return_mean, 200);
     let succ = curve(&runs, |m| m.success_rate.map(|s| 100.0 * s), 200);
     if ret.is_none() && succ.is_none() {
-        return Err(format!(
+        return Err(MakeError::Input(format!(
             "plot: no finished episodes in the metrics of {}",
             dirs.iter()
                 .map(|d| d.display().to_string())
                 .collect::<Vec<_>>()
                 .join(", ")
-        ));
+        )));
     }
     let mut buf = vec![255u8; (W * H * 3) as usize];
     let mut labels: Vec<(i32, i32, String)> = Vec::new();
@@ -111,9 +116,11 @@ pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), String> {
         ];
         for (area, c, name, fixed) in panels {
             let Some(c) = c else { continue };
-            draw_panel(&area, c, fixed, name, &mut labels).map_err(|e| format!("plot: {e}"))?;
+            draw_panel(&area, c, fixed, name, &mut labels)
+                .map_err(|e| MakeError::Runtime(format!("plot: {e}")))?;
         }
-        root.present().map_err(|e| format!("plot: {e}"))?;
+        root.present()
+            .map_err(|e| MakeError::Runtime(format!("plot: {e}")))?;
     }
     let caption = format!(
         "{title}  ({} run{})",
@@ -125,7 +132,8 @@ pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), String> {
         let (x, y) = (x.max(0) as u32, y.max(0) as u32);
         modesuite_render::hud::draw_text(&mut buf, W, H, 3, (x, y), 2, &[text], [20, 20, 20]);
     }
-    write_png_atomic(out, &buf)
+    modesuite_render::video::write_png(out, W, H, &buf)
+        .map_err(|e| MakeError::Runtime(e.to_string()))
 }
 
 type Labels = Vec<(i32, i32, String)>;
@@ -216,22 +224,6 @@ fn tick(v: f64, span: f64) -> String {
         let decimals = (2.0 - span.max(1e-9).log10().floor()).clamp(0.0, 4.0) as usize;
         format!("{v:.decimals$}")
     }
-}
-
-/// Encodes an RGB image as PNG and writes it atomically
-/// ([`modesuite_engine::fsio::write_atomic`]).
-fn write_png_atomic(path: &Path, rgb: &[u8]) -> Result<(), String> {
-    let err = |e: &dyn std::fmt::Display| format!("{}: cannot write: {e}", path.display());
-    let mut png_bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut png_bytes, W, H);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut w = enc.write_header().map_err(|e| err(&e))?;
-        w.write_image_data(rgb).map_err(|e| err(&e))?;
-        w.finish().map_err(|e| err(&e))?;
-    }
-    modesuite_engine::fsio::write_atomic(path, &png_bytes).map_err(|e| err(&e))
 }
 
 #[cfg(test)]

@@ -125,8 +125,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         } else if m.iteration % 10 == 0 {
             eprintln!("{line}");
         }
-    })
-    .map_err(CliError::input)?;
+    })?;
     if tty {
         eprintln!();
     }
@@ -188,6 +187,6 @@ pub fn plot(args: &PlotArgs, out: &mut dyn Write) -> Result<(), CliError> {
             .map(|(p, o)| format!("{} {}", p.meta().algo.to_uppercase(), o.target))
             .unwrap_or_else(|_| args.dirs[0].display().to_string()),
     };
-    crate::plot::plot(&args.dirs, &args.out, &title).map_err(CliError::input)?;
+    crate::plot::plot(&args.dirs, &args.out, &title)?;
     writeln!(out, "wrote {}", args.out.display()).map_err(io)
 }

@@ -29,11 +29,18 @@ enum Sink {
         child: Child,
         stdin: Option<ChildStdin>,
     },
+    /// Finished (the sink was taken by `finish`).
+    Done,
 }
 
 /// Writes frames of one size into a video file chosen by its extension (`.gif` or `.mp4`).
+/// The frames go to a temporary file beside it (`.NAME.PID.partial.EXT`), renamed into place by
+/// [`VideoWriter::finish`]; a writer dropped unfinished (an error, a full disk) removes it, so
+/// `path` is either the complete video or untouched.
 pub struct VideoWriter {
     path: PathBuf,
+    /// Where the frames are written until `finish`.
+    tmp: PathBuf,
     width: u32,
     height: u32,
     fps: f64,
@@ -51,6 +58,7 @@ impl VideoWriter {
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
+        let tmp = partial_path(path, ext.as_deref().unwrap_or("video"));
         let sink = match ext.as_deref() {
             Some("gif") => {
                 if width > u16::MAX as u32 || height > u16::MAX as u32 {
@@ -59,13 +67,17 @@ impl VideoWriter {
                         "GIF frames are at most 65535 px wide and high",
                     ));
                 }
-                let file = File::create(path).map_err(|e| out_err(path, e))?;
-                let mut enc =
+                let file = File::create(&tmp).map_err(|e| out_err(path, e))?;
+                let started =
                     gif::Encoder::new(BufWriter::new(file), width as u16, height as u16, &[])
-                        .map_err(|e| out_err(path, e))?;
-                enc.set_repeat(gif::Repeat::Infinite)
-                    .map_err(|e| out_err(path, e))?;
-                Sink::Gif(enc)
+                        .and_then(|mut enc| enc.set_repeat(gif::Repeat::Infinite).map(|()| enc));
+                match started {
+                    Ok(enc) => Sink::Gif(enc),
+                    Err(e) => {
+                        let _ = std::fs::remove_file(&tmp);
+                        return Err(out_err(path, e));
+                    }
+                }
             }
             Some("mp4") => {
                 if !ffmpeg_available() {
@@ -87,7 +99,7 @@ impl VideoWriter {
                     .args(["-s", &format!("{width}x{height}"), "-r", &format!("{fps}")])
                     .args(["-i", "-", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"])
                     .args(["-pix_fmt", "yuv420p", "-movflags", "+faststart"])
-                    .arg(path)
+                    .arg(&tmp)
                     .stdin(Stdio::piped())
                     .stdout(Stdio::null())
                     .stderr(Stdio::piped())
@@ -105,6 +117,7 @@ impl VideoWriter {
         };
         Ok(Self {
             path: path.to_path_buf(),
+            tmp,
             width,
             height,
             fps,
@@ -142,6 +155,7 @@ impl VideoWriter {
                 pipe.write_all(&frame.rgb)
                     .map_err(|e| out_err(&self.path, format!("ffmpeg: {e}")))?;
             }
+            Sink::Done => return Err(out_err(&self.path, "the video is finished")),
         }
         self.frames += 1;
         Ok(())
@@ -152,13 +166,16 @@ impl VideoWriter {
         self.frames
     }
 
-    /// Finishes the file; returns the number of frames.
-    pub fn finish(self) -> Result<usize, RenderError> {
-        let path = self.path;
-        match self.sink {
+    /// Finishes the file and moves it into place; returns the number of frames. On an error
+    /// the temporary file is removed and the video's path is left as it was.
+    pub fn finish(mut self) -> Result<usize, RenderError> {
+        let path = self.path.clone();
+        let sink = std::mem::replace(&mut self.sink, Sink::Done);
+        match sink {
             Sink::Gif(enc) => {
-                let mut w = enc.into_inner().map_err(|e| out_err(&path, e))?;
-                w.flush().map_err(|e| out_err(&path, e))?;
+                let w = enc.into_inner().map_err(|e| out_err(&path, e))?;
+                let file = w.into_inner().map_err(|e| out_err(&path, e.error()))?;
+                file.sync_all().map_err(|e| out_err(&path, e))?;
             }
             Sink::Ffmpeg { child, stdin } => {
                 drop(stdin);
@@ -176,9 +193,37 @@ impl VideoWriter {
                     ));
                 }
             }
+            Sink::Done => {}
         }
+        std::fs::rename(&self.tmp, &path)
+            .map_err(|e| out_err(&path, format!("cannot move the video into place: {e}")))?;
         Ok(self.frames)
     }
+}
+
+impl Drop for VideoWriter {
+    fn drop(&mut self) {
+        if let Sink::Ffmpeg { child, stdin } = &mut self.sink {
+            drop(stdin.take());
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+        // After a successful `finish` the temporary file was renamed: nothing to remove.
+        let _ = std::fs::remove_file(&self.tmp);
+    }
+}
+
+/// The temporary file a video is written to: beside `path`, hidden, ending in `.EXT` so
+/// ffmpeg picks the container from it.
+fn partial_path(path: &Path, ext: &str) -> PathBuf {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let name = path
+        .file_name()
+        .map_or("video".into(), |n| n.to_string_lossy());
+    dir.join(format!(".{name}.{}.partial.{ext}", std::process::id()))
 }
 
 /// Writes an RGB image (`height x width x 3` u8) as a PNG file.
@@ -189,14 +234,18 @@ pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(),
             format!("{} bytes for a {width}x{height} RGB image", rgb.len()),
         ));
     }
-    let file = File::create(path).map_err(|e| out_err(path, e))?;
-    let mut enc = png::Encoder::new(BufWriter::new(file), width, height);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    enc.set_compression(png::Compression::Fast);
-    let mut w = enc.write_header().map_err(|e| out_err(path, e))?;
-    w.write_image_data(rgb).map_err(|e| out_err(path, e))?;
-    w.finish().map_err(|e| out_err(path, e))
+    // Encoded in memory, then written atomically: a full disk or a kill leaves no half image.
+    let mut bytes = Vec::with_capacity(rgb.len() / 2 + 1024);
+    {
+        let mut enc = png::Encoder::new(&mut bytes, width, height);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::Fast);
+        let mut w = enc.write_header().map_err(|e| out_err(path, e))?;
+        w.write_image_data(rgb).map_err(|e| out_err(path, e))?;
+        w.finish().map_err(|e| out_err(path, e))?;
+    }
+    modesuite_engine::fsio::write_atomic(path, &bytes).map_err(|e| out_err(path, e))
 }
 
 /// Writes a frame's colour image as a PNG file.
