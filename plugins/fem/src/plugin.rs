@@ -193,6 +193,9 @@ impl DeformableSolver for FemSolid {
     }
 }
 
+/// Largest `fem.solid` mesh a scene may ask for, in (linear) tetrahedra.
+pub const MAX_TETRAHEDRA: usize = 20_000;
+
 /// Adds the `fem.solid` body kind and the solid systems.
 pub struct FemPlugin;
 
@@ -259,6 +262,15 @@ impl BodyKind for SolidKind {
         let mesh = ctx.object.shape.volume(ctx.shapes).map_err(|e| {
             SceneError::semantic(format!("{}.shape", ctx.path), "(shape)", e.to_string())
         })?;
+        if mesh.tets.len() > MAX_TETRAHEDRA {
+            return Err(SceneError::semantic(
+                format!("{}.shape", ctx.path),
+                format!("{} tetrahedra", mesh.tets.len()),
+                format!(
+                    "at most {MAX_TETRAHEDRA} tetrahedra for a fem.solid (10-node elements and a direct solver: a step of 4,000 already takes seconds); coarsen the mesh (fewer divisions or segments)"
+                ),
+            ));
+        }
         let pose = ctx.object.pose.isometry();
         let nodes: Vec<_> = mesh
             .nodes

@@ -252,6 +252,9 @@ impl DeformableSolver for Cloth {
     }
 }
 
+/// Largest `pbd.cloth` a scene may ask for, in particles (surface vertices).
+pub const MAX_PARTICLES: usize = 100_000;
+
 /// Adds the `pbd.cloth` body kind and the cloth systems.
 pub struct PbdPlugin;
 
@@ -289,6 +292,13 @@ impl BodyKind for ClothKind {
         let surface = ctx.object.shape.surface(ctx.shapes).map_err(|e| {
             SceneError::semantic(format!("{}.shape", ctx.path), "(shape)", e.to_string())
         })?;
+        if surface.positions.len() > MAX_PARTICLES {
+            return Err(SceneError::semantic(
+                format!("{}.shape", ctx.path),
+                format!("{} particles", surface.positions.len()),
+                format!("at most {MAX_PARTICLES} particles (surface vertices) for a pbd.cloth; use a coarser resolution"),
+            ));
+        }
         if surface.triangles.is_empty() {
             return Err(SceneError::semantic(
                 format!("{}.shape", ctx.path),
