@@ -36,6 +36,7 @@ use modesuite_engine::{DynamicPlugin, PluginLoadError};
 mod fuzz;
 pub mod learn;
 mod record;
+mod soak;
 
 use crate::episode::{final_success, EpisodeEnd};
 use crate::make::{self, load_plugins, MakeError, MakeOptions};
@@ -89,6 +90,9 @@ pub enum Command {
     /// Fuzz the input parsers and loaders (scene, task, robot, URDF, actions, meshes, state
     /// files) with mutated inputs; exit 1 if any input panicked, 3 if one hung.
     Fuzz(fuzz::FuzzArgs),
+    /// Step the 16 tasks with random actions for a long time, sampling resident memory (a
+    /// leak check); exit 1 if memory grew beyond the limit after the warm-up.
+    Soak(soak::SoakArgs),
     /// Run a benchmark suite: engine, fem, pbd, contact, robots, render, tasks.
     Bench {
         /// Suite name.
@@ -261,6 +265,7 @@ pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
         Some(Command::Eval(args)) => learn::eval(&args, out),
         Some(Command::Plot(args)) => learn::plot(&args, out),
         Some(Command::Fuzz(args)) => fuzz::fuzz(&args, out),
+        Some(Command::Soak(args)) => soak::soak(&args, out),
         Some(Command::Bench {
             name,
             json,

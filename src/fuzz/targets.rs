@@ -447,8 +447,8 @@ fn run_generated(b: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// Every task id.
-fn task_ids() -> Vec<String> {
+/// Every task id (from the scenes folder: `<task>/<robot>.scene.ron`).
+pub fn task_ids() -> Vec<String> {
     let mut ids = Vec::new();
     for t in files(&scenes_dir(), ".scene.ron") {
         let Some(task) = t.parent().and_then(|p| p.file_name()) else {
