@@ -86,3 +86,14 @@ fn fuzz_generated_scenes() {
 fn fuzz_tasks_random_and_bang_bang_actions() {
     tier("tasks", 4);
 }
+
+#[test]
+fn fuzz_training_checkpoints() {
+    tier("checkpoint", 200);
+    tier("checkpoint_body", 200);
+}
+
+#[test]
+fn fuzz_policies() {
+    tier("policy", 1000);
+}

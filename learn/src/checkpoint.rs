@@ -193,19 +193,22 @@ impl Checkpoint {
         if fnv1a(body) != u64::from_le_bytes(tail.try_into().unwrap()) {
             return Err(bad("checkpoint is corrupt (hash mismatch)"));
         }
-        let hlen = u64::from_le_bytes(body[12..20].try_into().unwrap()) as usize;
-        if 20 + hlen > body.len() {
-            return Err(bad("checkpoint header is truncated"));
-        }
-        let header: Header = serde_json::from_slice(&body[20..20 + hlen])
+        let hlen = u64::from_le_bytes(body[12..20].try_into().unwrap());
+        let header_end = usize::try_from(hlen)
+            .ok()
+            .and_then(|h| h.checked_add(20))
+            .filter(|&e| e <= body.len())
+            .ok_or_else(|| bad("checkpoint header is truncated"))?;
+        let header: Header = serde_json::from_slice(&body[20..header_end])
             .map_err(|e| LearnError::Checkpoint(format!("checkpoint header: {e}")))?;
-        let mut at = 20 + hlen;
+        let mut at = header_end;
         let mut sections = BTreeMap::new();
         for (name, len) in header.sections {
-            let end = at + len as usize;
-            if end > body.len() {
-                return Err(bad("checkpoint section is truncated"));
-            }
+            let end = usize::try_from(len)
+                .ok()
+                .and_then(|l| l.checked_add(at))
+                .filter(|&e| e <= body.len())
+                .ok_or_else(|| bad("checkpoint section is truncated"))?;
             sections.insert(name, body[at..end].to_vec());
             at = end;
         }

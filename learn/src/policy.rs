@@ -162,6 +162,78 @@ pub(crate) fn export_sac(
     write(dir, &meta, record_bytes(actor.valid())?)
 }
 
+/// Largest sizes a policy file may declare (a damaged or hostile file must not make
+/// [`Policy::load`] allocate without bound).
+const MAX_DIM: usize = 1 << 20;
+const MAX_PARAMETERS: usize = 1 << 27;
+
+impl PolicyMeta {
+    /// Checks sizes, bounds and normaliser statistics: the message names the field.
+    pub fn check(&self) -> Result<(), String> {
+        if !(1..=MAX_DIM).contains(&self.obs_dim) || !(1..=MAX_DIM).contains(&self.act_dim) {
+            return Err(format!(
+                "obs_dim = {}, act_dim = {}: each in 1..={MAX_DIM}",
+                self.obs_dim, self.act_dim
+            ));
+        }
+        if self.hidden.is_empty()
+            || self.hidden.len() > 16
+            || self.hidden.iter().any(|h| !(1..=MAX_DIM).contains(h))
+        {
+            return Err(format!(
+                "hidden = {:?}: 1 to 16 layers of 1..={MAX_DIM} units",
+                self.hidden
+            ));
+        }
+        let mut params = 0usize;
+        let mut width = self.obs_dim;
+        for &h in self.hidden.iter().chain([&self.act_dim]) {
+            params = params.saturating_add(width.saturating_mul(h).saturating_add(h));
+            width = h;
+        }
+        if params > MAX_PARAMETERS {
+            return Err(format!(
+                "a network of {params} parameters (obs_dim {}, hidden {:?}, act_dim {}): at most {MAX_PARAMETERS}",
+                self.obs_dim, self.hidden, self.act_dim
+            ));
+        }
+        if self.low.len() != self.act_dim || self.high.len() != self.act_dim {
+            return Err(format!(
+                "low and high have {} and {} values: act_dim = {} each",
+                self.low.len(),
+                self.high.len(),
+                self.act_dim
+            ));
+        }
+        if let Some(k) = (0..self.act_dim).find(|&k| {
+            let (l, h) = (self.low[k], self.high[k]);
+            !(l.is_finite() && h.is_finite() && l <= h && (h - l).is_finite())
+        }) {
+            return Err(format!(
+                "low[{k}] = {}, high[{k}] = {}: finite with low <= high",
+                self.low[k], self.high[k]
+            ));
+        }
+        if let Some(n) = &self.obs_norm {
+            let stats_ok = n.mean.len() == self.obs_dim
+                && n.var.len() == self.obs_dim
+                && n.mean.iter().all(|m| m.is_finite())
+                && n.var.iter().all(|v| v.is_finite() && *v >= 0.0)
+                && n.eps.is_finite()
+                && n.eps > 0.0
+                && n.clip.is_finite()
+                && n.clip > 0.0;
+            if !stats_ok {
+                return Err(format!(
+                    "obs_norm: obs_dim = {} finite means, as many finite variances >= 0, eps > 0 and clip > 0",
+                    self.obs_dim
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Policy {
     /// Loads a policy from its folder (holding `policy.json`) or from a run folder (holding
     /// `policy/policy.json`).
@@ -184,6 +256,8 @@ impl Policy {
                 meta.format_version
             )));
         }
+        meta.check()
+            .map_err(|m| LearnError::Checkpoint(format!("{}: {m}", meta_path.display())))?;
         let w_path = dir.join("weights.bpk");
         let weights = std::fs::read(&w_path)
             .map_err(|e| LearnError::Io(format!("{}: {e}", w_path.display())))?;
@@ -215,7 +289,19 @@ impl Policy {
                 )));
             }
         };
-        Ok(Policy { meta, net, device })
+        let policy = Policy { meta, net, device };
+        // Damaged weights (a NaN anywhere in a bias or in the first layer) show in the action
+        // of a plain observation: refuse them here rather than return NaN actions later.
+        for probe in [0.0f32, 1.0] {
+            let a = policy.act(&vec![probe; policy.meta.obs_dim]);
+            if a.iter().any(|x| !x.is_finite()) {
+                return Err(LearnError::Checkpoint(format!(
+                    "{}: the weights give non-finite actions (a damaged file?)",
+                    w_path.display()
+                )));
+            }
+        }
+        Ok(policy)
     }
 
     /// What the policy is.

@@ -181,7 +181,7 @@ pub fn run_campaign(t: &'static Target, c: &Campaign, progress: &mut dyn FnMut(&
     corpus.extend(regressions(t.name).into_iter().map(|(_, b)| b));
     let dog = Watchdog::start(t.name, c.hang_limit, c.out.clone());
     quiet_panics_in_campaigns();
-    let mut mutator = mutate::Mutator::new(c.seed ^ fnv(t.name));
+    let mut mutator = mutate::Mutator::new(c.seed ^ fnv1a(t.name.as_bytes()));
     let one = |input: &[u8], report: &mut Report| {
         dog.begin(input);
         let t0 = Instant::now();
@@ -242,9 +242,10 @@ fn quiet_panics_in_campaigns() {
     });
 }
 
-/// FNV-1a of a name (a per-target salt for the mutator's seed).
-fn fnv(s: &str) -> u64 {
-    s.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+/// 64-bit FNV-1a of bytes (a per-target salt for the mutator's seed; the checksum of training
+/// checkpoints).
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
         (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
     })
 }

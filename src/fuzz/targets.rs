@@ -95,6 +95,24 @@ pub const TARGETS: &[Target] = &[
         run: run_state_body,
     },
     Target {
+        name: "checkpoint",
+        about: "training checkpoints (checkpoint.bin of a small PPO run) resumed for one more iteration",
+        seeds: checkpoint_seeds,
+        run: run_checkpoint,
+    },
+    Target {
+        name: "checkpoint_body",
+        about: "training checkpoints with their hash re-sealed after the edit (a careless tool's), resumed",
+        seeds: checkpoint_seeds,
+        run: |b| run_checkpoint(&resealed_checkpoint(b)),
+    },
+    Target {
+        name: "policy",
+        about: "policy folders (policy.json, a NUL line, weights.bpk) loaded with Policy::load and asked for an action",
+        seeds: policy_seeds,
+        run: run_policy,
+    },
+    Target {
         name: "generated",
         about: "random valid scenes (every shape generator; rigid, FEM and cloth bodies) from the input's seed, 20 steps",
         seeds: || (0u64..8).map(|k| k.to_le_bytes().to_vec()).collect(),
@@ -513,6 +531,101 @@ fn run_tasks(b: &[u8]) -> Result<(), String> {
             check_error_names_object(&out.info);
         }
     }
+    Ok(())
+}
+
+/// A small PPO run on Franka Place (2 envs, 64-step rollouts, a 16-unit network) in `dir`.
+fn small_run(dir: &Path, env_steps: u64) -> Result<(), String> {
+    let req = crate::learning::TrainRequest {
+        target: "MoDe-Franka-Place-v0".into(),
+        algo: "ppo".into(),
+        seed: Some(0),
+        env_steps: Some(env_steps),
+        envs: 2,
+        threads: 1,
+        out: dir.to_path_buf(),
+        config: None,
+        set: vec!["horizon=64".into(), "hidden=[16]".into()],
+        checkpoint_every: 1,
+        actions: None,
+        command: "fuzz".into(),
+    };
+    crate::learning::train(&req, |_| {})
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+}
+
+/// The folder of the seed run (made once per process).
+fn seed_run() -> Option<&'static Path> {
+    static RUN: OnceLock<Option<PathBuf>> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let dir = workdir().join("seed-run");
+        let _ = std::fs::remove_dir_all(&dir);
+        small_run(&dir, 128).ok().map(|()| dir)
+    })
+    .as_deref()
+}
+
+fn checkpoint_seeds() -> Vec<Vec<u8>> {
+    seed_run()
+        .map(|d| read(&d.join("checkpoint.bin")))
+        .into_iter()
+        .filter(|b| !b.is_empty())
+        .collect()
+}
+
+/// Resumes the seed run from `b` as its checkpoint, for one more iteration (128 env steps).
+fn run_checkpoint(b: &[u8]) -> Result<(), String> {
+    let seed = seed_run().ok_or("the seed run could not be made")?;
+    let dir =
+        workdir().join(format!("ckpt-{:?}", std::thread::current().id()).replace(['(', ')'], ""));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    for f in ["config.ron", "metrics.jsonl"] {
+        std::fs::copy(seed.join(f), dir.join(f)).map_err(|e| e.to_string())?;
+    }
+    std::fs::write(dir.join("checkpoint.bin"), b).map_err(|e| e.to_string())?;
+    small_run(&dir, 256)
+}
+
+/// `b` with its last 8 bytes replaced by the FNV-1a hash of the rest, as checkpoints end.
+fn resealed_checkpoint(b: &[u8]) -> Vec<u8> {
+    let n = b.len().saturating_sub(8);
+    let mut out = b[..n].to_vec();
+    out.extend(super::fnv1a(&out).to_le_bytes());
+    out
+}
+
+/// The separator of a `policy` input's two files.
+const POLICY_SEPARATOR: &[u8] = b"\n\0\n";
+
+fn policy_seeds() -> Vec<Vec<u8>> {
+    let Some(d) = seed_run() else {
+        return Vec::new();
+    };
+    let mut b = read(&d.join("policy/policy.json"));
+    b.extend_from_slice(POLICY_SEPARATOR);
+    b.extend(read(&d.join("policy/weights.bpk")));
+    vec![b]
+}
+
+/// Loads a policy folder made of the input's two parts and asks it for an action.
+fn run_policy(b: &[u8]) -> Result<(), String> {
+    let (json, weights) = match b
+        .windows(POLICY_SEPARATOR.len())
+        .position(|w| w == POLICY_SEPARATOR)
+    {
+        Some(k) => (&b[..k], &b[k + POLICY_SEPARATOR.len()..]),
+        None => (b, &b[b.len()..]),
+    };
+    let dir =
+        workdir().join(format!("policy-{:?}", std::thread::current().id()).replace(['(', ')'], ""));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    std::fs::write(dir.join("policy.json"), json).map_err(|e| e.to_string())?;
+    std::fs::write(dir.join("weights.bpk"), weights).map_err(|e| e.to_string())?;
+    let p = modesuite_learn::Policy::load(&dir).map_err(|e| e.to_string())?;
+    let a = p.act(&vec![0.5f32; p.obs_dim()]);
+    assert_finite("policy action", &a);
     Ok(())
 }
 
