@@ -297,6 +297,39 @@ mod tests {
         }
     }
 
+    /// Lengths near 2^64 in a checkpoint whose hash is valid are refused, not overflowed.
+    #[test]
+    fn huge_lengths_with_a_valid_hash_are_refused() {
+        let mut c = Checkpoint::new(ident(), "()".into());
+        c.put_f32s("w", &[1.0, 2.0]);
+        let good = c.to_bytes();
+        let reseal = |mut b: Vec<u8>| {
+            let n = b.len() - 8;
+            let h = fnv1a(&b[..n]);
+            b[n..].copy_from_slice(&h.to_le_bytes());
+            b
+        };
+        // the header length
+        let mut b = good.clone();
+        b[12..20].copy_from_slice(&(u64::MAX - 3).to_le_bytes());
+        let e = Checkpoint::from_bytes(&reseal(b)).unwrap_err().to_string();
+        assert!(e.contains("truncated"), "{e}");
+        // a section length inside the JSON header
+        let hlen = u64::from_le_bytes(good[12..20].try_into().unwrap()) as usize;
+        let header = String::from_utf8(good[20..20 + hlen].to_vec()).unwrap();
+        let huge = header.replace("[\"w\",8]", "[\"w\",18446744073709551615]");
+        assert_ne!(
+            huge, header,
+            "the section list is written as [name, length]: {header}"
+        );
+        let mut b = good[..12].to_vec();
+        b.extend((huge.len() as u64).to_le_bytes());
+        b.extend(huge.as_bytes());
+        b.extend(&good[20 + hlen..]);
+        let e = Checkpoint::from_bytes(&reseal(b)).unwrap_err().to_string();
+        assert!(e.contains("truncated"), "{e}");
+    }
+
     #[test]
     fn a_failed_atomic_write_leaves_no_temporary_file() {
         let dir = std::env::temp_dir().join(format!("mslearn-atomic-{}", std::process::id()));
