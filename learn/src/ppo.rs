@@ -517,11 +517,12 @@ impl Trainer for Ppo {
 
     fn read_state(&mut self, c: &Checkpoint) -> Result<(), LearnError> {
         self.model = load_record(self.model.clone(), c.bytes("model")?)?;
-        self.optim = optimizer(&self.cfg)
-            .from_bytes(burn::tensor::Bytes::from_bytes_vec(
-                c.bytes("optim")?.to_vec(),
-            ))
-            .map_err(rec_err)?;
+        let bytes = c.bytes("optim")?.to_vec();
+        self.optim = guarded("optim", || {
+            optimizer(&self.cfg)
+                .from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes))
+                .map_err(rec_err)
+        })?;
         self.obs_rms = rms_from(c, "obs_rms", self.shape.obs_dim)?;
         self.value_rms = rms_from(c, "value_rms", 1)?;
         self.rng = Rng::from_state(c.u64_array::<4>("rng")?);
@@ -579,10 +580,32 @@ pub(crate) fn record_bytes<M: Module>(m: M) -> Result<Vec<u8>, LearnError> {
 }
 
 pub(crate) fn load_record<M: Module>(m: M, bytes: &[u8]) -> Result<M, LearnError> {
-    let rec =
-        burn::store::ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes.to_vec()))
-            .map_err(rec_err)?;
-    m.try_load_record(rec).map_err(rec_err)
+    guarded("record", || {
+        let rec = burn::store::ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(
+            bytes.to_vec(),
+        ))
+        .map_err(rec_err)?;
+        m.try_load_record(rec).map_err(rec_err)
+    })
+}
+
+/// Runs a decoder of burn records, turning a panic inside burn (it asserts on some malformed
+/// records, e.g. optimizer tensors without a parameter id) into a checkpoint error naming
+/// `what`.
+pub(crate) fn guarded<T>(
+    what: &str,
+    f: impl FnOnce() -> Result<T, LearnError>,
+) -> Result<T, LearnError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| {
+        let why = p
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_default();
+        Err(LearnError::Checkpoint(format!(
+            "section '{what}' is malformed ({why})"
+        )))
+    })
 }
 
 pub(crate) fn rms_from(

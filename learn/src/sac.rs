@@ -13,7 +13,7 @@ use crate::config::{AlgoConfig, SacConfig};
 use crate::dist::tanh_gaussian_log_prob;
 use crate::metrics::{EpisodeTracker, Metrics};
 use crate::nets::{clip_grad_norm, flat_params, polyak, Dense, Mlp};
-use crate::ppo::{load_record, rec_err, record_bytes};
+use crate::ppo::{guarded, load_record, rec_err, record_bytes};
 use crate::rng::Rng;
 use crate::runner::{check_step, rescale, restart, EnvShape, Trainer};
 use crate::tensors::{scalar, tensor1, tensor2, to_vec};
@@ -605,9 +605,12 @@ impl Trainer for Sac {
 
     fn read_state(&mut self, c: &Checkpoint) -> Result<(), LearnError> {
         let opt = |name: &str| -> Result<ModuleOptimizer, LearnError> {
-            adam()
-                .from_bytes(burn::tensor::Bytes::from_bytes_vec(c.bytes(name)?.to_vec()))
-                .map_err(rec_err)
+            let bytes = c.bytes(name)?.to_vec();
+            guarded(name, || {
+                adam()
+                    .from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes))
+                    .map_err(rec_err)
+            })
         };
         self.actor = load_record(self.actor.clone(), c.bytes("actor")?)?;
         self.critic = load_record(self.critic.clone(), c.bytes("critic")?)?;

@@ -120,18 +120,7 @@ pub(super) fn fuzz(args: &FuzzArgs, out: &mut dyn Write) -> Result<(), CliError>
             });
             writeln!(out, "{line}").map_err(io)?;
         } else {
-            writeln!(
-                out,
-                "{:<8} {:>7} inputs ({} accepted, {} refused), {} panics, slowest {:.2} s, {:.1} s",
-                r.target,
-                r.tried,
-                r.accepted,
-                r.refused,
-                r.panics.len(),
-                r.slowest_s,
-                r.wall_s
-            )
-            .map_err(io)?;
+            writeln!(out, "{}", r.line()).map_err(io)?;
         }
         for (msg, file) in &r.panics {
             let at = file

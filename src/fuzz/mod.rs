@@ -46,6 +46,22 @@ pub struct Report {
     pub wall_s: f64,
 }
 
+impl Report {
+    /// One line: inputs, accepted, refused, panics, slowest input, wall time.
+    pub fn line(&self) -> String {
+        format!(
+            "{:<8} {:>7} inputs ({} accepted, {} refused), {} panics, slowest {:.2} s, {:.1} s",
+            self.target,
+            self.tried,
+            self.accepted,
+            self.refused,
+            self.panics.len(),
+            self.slowest_s,
+            self.wall_s
+        )
+    }
+}
+
 /// How to run a campaign.
 #[derive(Debug, Clone)]
 pub struct Campaign {

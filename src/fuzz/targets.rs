@@ -206,6 +206,14 @@ fn assert_finite(what: &str, v: &[f32]) {
     }
 }
 
+/// Compiles and spawns a scene with every default plugin, then steps it ([`exercise`]).
+fn spawn_and_exercise(desc: &scene::SceneDesc, source: &SceneSource) -> Result<(), String> {
+    let mut app = default_app();
+    let model = app.compile_scene(desc, source).map_err(|e| e.to_string())?;
+    app.spawn_scene(model).map_err(|e| e.to_string())?;
+    exercise(Env::new(app))
+}
+
 /// Compiles and spawns scene text read from `file` (a name in the work folder), then steps it.
 fn scene_env(text: &str, file: &Path) -> Result<(), String> {
     let desc = scene::parse_str(text, &file.display().to_string()).map_err(|e| e.to_string())?;
@@ -215,19 +223,22 @@ fn scene_env(text: &str, file: &Path) -> Result<(), String> {
         asset_roots: scene::default_asset_roots(),
         text: Some(text.to_string()),
     };
-    let mut app = default_app();
-    let model = app
-        .compile_scene(&desc, &source)
-        .map_err(|e| e.to_string())?;
-    app.spawn_scene(model).map_err(|e| e.to_string())?;
-    exercise(Env::new(app))
+    spawn_and_exercise(&desc, &source)
+}
+
+/// A path in the work folder private to this thread (parallel tests do not share it).
+fn thread_path(prefix: &str, suffix: &str) -> PathBuf {
+    let id = format!("{:?}", std::thread::current().id()).replace(['(', ')'], "");
+    workdir().join(format!("{prefix}-{id}{suffix}"))
+}
+
+/// The contents of the files under `dir` ending in `suffix`.
+fn contents(dir: &Path, suffix: &str) -> Vec<Vec<u8>> {
+    files(dir, suffix).iter().map(|p| read(p)).collect()
 }
 
 fn scene_seeds() -> Vec<Vec<u8>> {
-    files(&scenes_dir(), ".scene.ron")
-        .iter()
-        .map(|p| read(p))
-        .collect()
+    contents(&scenes_dir(), ".scene.ron")
 }
 
 fn run_scene(b: &[u8]) -> Result<(), String> {
@@ -274,7 +285,7 @@ fn task_seeds() -> Vec<Vec<u8>> {
         .unwrap_or_default()
         .to_string();
     std::iter::once(own.into_bytes())
-        .chain(files(&scenes_dir(), ".task.ron").iter().map(|p| read(p)))
+        .chain(contents(&scenes_dir(), ".task.ron"))
         .collect()
 }
 
@@ -285,18 +296,13 @@ fn run_task(b: &[u8]) -> Result<(), String> {
 }
 
 fn robot_seeds() -> Vec<Vec<u8>> {
-    files(&assets_dir().join("robots"), ".robot.ron")
-        .iter()
-        .map(|p| read(p))
-        .collect()
+    contents(&assets_dir().join("robots"), ".robot.ron")
 }
 
 /// The pedestal example scene with its robot model pointing at `model`.
 fn run_robot(b: &[u8]) -> Result<(), String> {
     let dir = workdir();
-    // One file per thread, so parallel tests do not share it.
-    let file = dir
-        .join(format!("fuzz-{:?}.robot.ron", std::thread::current().id()).replace(['(', ')'], ""));
+    let file = thread_path("fuzz", ".robot.ron");
     std::fs::write(&file, b).map_err(|e| format!("work file: {e}"))?;
     let scene_text = String::from_utf8(read(
         &scenes_dir().join("examples/franka_pedestal.scene.ron"),
@@ -310,19 +316,11 @@ fn run_robot(b: &[u8]) -> Result<(), String> {
     let mut source = SceneSource::in_memory(dir);
     source.asset_roots = scene::default_asset_roots();
     source.asset_roots.push(dir.to_path_buf());
-    let mut app = default_app();
-    let model = app
-        .compile_scene(&desc, &source)
-        .map_err(|e| e.to_string())?;
-    app.spawn_scene(model).map_err(|e| e.to_string())?;
-    exercise(Env::new(app))
+    spawn_and_exercise(&desc, &source)
 }
 
 fn urdf_seeds() -> Vec<Vec<u8>> {
-    files(&assets_dir().join("robots"), ".urdf")
-        .iter()
-        .map(|p| read(p))
-        .collect()
+    contents(&assets_dir().join("robots"), ".urdf")
 }
 
 fn run_urdf(b: &[u8]) -> Result<(), String> {
@@ -348,12 +346,7 @@ fn run_actions(b: &[u8]) -> Result<(), String> {
     let file = scenes_dir().join("place/franka.scene.ron");
     let (mut desc, source) = scene::load_file(&file).map_err(|e| e.to_string())?;
     override_actions(&mut desc, text(b)?).map_err(|e| e.to_string())?;
-    let mut app = default_app();
-    let model = app
-        .compile_scene(&desc, &source)
-        .map_err(|e| e.to_string())?;
-    app.spawn_scene(model).map_err(|e| e.to_string())?;
-    exercise(Env::new(app))
+    spawn_and_exercise(&desc, &source)
 }
 
 fn surface(label: &str, b: &[u8]) -> Result<(), String> {
@@ -577,8 +570,7 @@ fn checkpoint_seeds() -> Vec<Vec<u8>> {
 /// Resumes the seed run from `b` as its checkpoint, for one more iteration (128 env steps).
 fn run_checkpoint(b: &[u8]) -> Result<(), String> {
     let seed = seed_run().ok_or("the seed run could not be made")?;
-    let dir =
-        workdir().join(format!("ckpt-{:?}", std::thread::current().id()).replace(['(', ')'], ""));
+    let dir = thread_path("ckpt", "");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     for f in ["config.ron", "metrics.jsonl"] {
@@ -618,8 +610,7 @@ fn run_policy(b: &[u8]) -> Result<(), String> {
         Some(k) => (&b[..k], &b[k + POLICY_SEPARATOR.len()..]),
         None => (b, &b[b.len()..]),
     };
-    let dir =
-        workdir().join(format!("policy-{:?}", std::thread::current().id()).replace(['(', ')'], ""));
+    let dir = thread_path("policy", "");
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     std::fs::write(dir.join("policy.json"), json).map_err(|e| e.to_string())?;
     std::fs::write(dir.join("weights.bpk"), weights).map_err(|e| e.to_string())?;
