@@ -101,6 +101,14 @@ def _make_core(
     )
 
 
+def _as_float32(a: np.ndarray) -> np.ndarray:
+    """Actions as contiguous float32. A value finite in float64 but beyond float32 becomes
+    +-inf without numpy's overflow warning: the simulator then ends the episode with an error
+    for the non-finite action, as for any other."""
+    with np.errstate(over="ignore"):
+        return np.ascontiguousarray(a, dtype=np.float32)
+
+
 def _action_error(action: Any, expected: str) -> ValueError:
     got = getattr(action, "shape", None)
     dtype = getattr(action, "dtype", type(action).__name__)
@@ -178,7 +186,7 @@ class ModeSuiteEnv(gym.Env):
         a = np.asarray(action)
         if a.dtype.kind not in "fiu" or a.shape != shape:
             raise _action_error(action, f"shape {shape}, a float array (float32)")
-        return np.ascontiguousarray(a, dtype=np.float32)
+        return _as_float32(a)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
@@ -341,7 +349,7 @@ class ModeSuiteVectorEnv(VectorEnv):
         a = np.asarray(actions)
         if a.dtype.kind not in "fiu" or a.shape != shape:
             raise _action_error(actions, f"shape {shape}, a float array (float32)")
-        return np.ascontiguousarray(a, dtype=np.float32)
+        return _as_float32(a)
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         if self.render_mode != "rgb_array":
