@@ -259,6 +259,16 @@ pub enum EventDesc {
         /// (lowest, highest) Young's modulus, Pa.
         youngs_modulus: (f64, f64),
     },
+    /// An event registered by a plugin under `event` (`modesuite list terms`, kind `event`;
+    /// [`crate::events::register_task_event`]), configured from `params` when the scene
+    /// compiles: `Event(event: "acme.gust", params: (object: "cloth", speed: 0.5))`.
+    Event {
+        /// Registered name.
+        event: String,
+        /// Its RON parameters (default `()`).
+        #[serde(default)]
+        params: Option<Box<ron::value::RawValue>>,
+    },
 }
 
 /// A deformable held by the robot from the start: the selected nodes (object frame, at spawn)

@@ -16,6 +16,7 @@
 //! yet".
 
 pub mod desc;
+pub mod events;
 pub mod expert;
 pub mod manager;
 pub mod terms;
@@ -25,6 +26,7 @@ use std::path::{Path, PathBuf};
 use modesuite_engine::{Plugin, SimApp};
 
 pub use desc::{EventDesc, PointRef, TaskDesc};
+pub use events::{register_task_event, EventCtx, TaskEvent, TaskEventFactory};
 pub use expert::{
     make_policy, register_expert, Expert, ExpertContext, Experts, Policy, PolicyKind,
 };

@@ -9,6 +9,7 @@ use modesuite_engine::registry::SectionCompileContext;
 use modesuite_engine::scene::SceneError;
 
 use crate::desc::{EventDesc, TaskDesc};
+use crate::events::{TaskEvent, TaskEventEntry};
 use crate::terms::{configure_any, Configure, TaskTerm};
 
 /// The cameras of the scene's render section: name -> (width, height).
@@ -63,13 +64,53 @@ fn check_range(
 }
 
 /// Checks an event of the task section (`wrapper`: the `Startup`/`Interval` it is inside).
+/// Checks one entry of a task's `events` (a built-in event's values, a registered event's
+/// configuration, the wrappers' rules) and returns the configured registered event, if the
+/// entry is one.
 pub(super) fn check_event(
+    ctx: &SectionCompileContext,
     epath: &str,
     e: &EventDesc,
     cfg: &Configure,
     wrapper: Option<&str>,
-) -> Result<(), SceneError> {
+) -> Result<Option<Arc<dyn TaskEvent>>, SceneError> {
     match e {
+        EventDesc::Event { event, params } => {
+            let entry = ctx
+                .registry
+                .terms
+                .get(event)
+                .and_then(|t| t.payload.downcast_ref::<TaskEventEntry>())
+                .ok_or_else(|| {
+                    serr(
+                        &format!("{epath}.event"),
+                        format!("\"{event}\""),
+                        format!(
+                            "a registered event: [{}]",
+                            ctx.registry
+                                .terms
+                                .iter()
+                                .filter(|(_, t)| t.payload.is::<TaskEventEntry>())
+                                .map(|(n, _)| n.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    )
+                })?;
+            let ron = params.as_ref().map_or("()", |p| p.get_ron());
+            let configured = entry
+                .0
+                .configure(ron, cfg)
+                .map_err(|m| serr(&format!("{epath}.params"), ron.trim(), m))?;
+            if wrapper == Some("Interval") && !configured.interval_safe() {
+                return Err(serr(
+                    &format!("{epath}.event"),
+                    format!("\"{event}\""),
+                    "an event that moves no body (this one is for resets and Startup only)",
+                ));
+            }
+            return Ok(Some(configured));
+        }
         EventDesc::RobotPose { xy, yaw, carry } => {
             if !(xy.is_finite() && *xy >= 0.0 && yaw.is_finite() && *yaw >= 0.0) {
                 return Err(serr(epath, format!("{e:?}"), "finite xy >= 0 and yaw >= 0"));
@@ -163,10 +204,10 @@ pub(super) fn check_event(
             } else {
                 format!("{epath}.event")
             };
-            check_event(&ipath, inner, cfg, Some(kind))?;
+            return check_event(ctx, &ipath, inner, cfg, Some(kind));
         }
     }
-    Ok(())
+    Ok(None)
 }
 
 pub(super) fn serr(path: &str, value: impl Into<String>, msg: impl Into<String>) -> SceneError {

@@ -12,8 +12,11 @@ use modesuite_engine::{Phase, RigidContext, SimClock, SimErrors};
 use modesuite_robots::Robots;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
+use std::sync::Arc;
+
 use super::{Task, TaskState};
 use crate::desc::EventDesc;
+use crate::events::{EventCtx, EventOps, TaskEvent};
 
 /// Rotation about z by `yaw` around `centre`, then translation by `d`.
 fn planar_move(centre: Vector3<f64>, d: Vector3<f64>, yaw: f64) -> Isometry3<f64> {
@@ -115,11 +118,50 @@ impl EventWorld<'_, '_> {
         Ok(())
     }
 
-    /// Draws and applies one event (`Startup`/`Interval` wrappers run their event now).
-    fn apply(&mut self, robot_name: &str, event: &str, e: &EventDesc) -> Result<(), String> {
+    /// Sets the friction coefficient of every collider of a rigid object.
+    fn set_friction(&mut self, object: &str, f: f64) -> Result<(), String> {
+        let rigid = self.rigid.as_deref_mut().ok_or("no rigid world")?;
+        let (_, body) = self
+            .bodies
+            .iter()
+            .find(|(o, _)| o.name == *object)
+            .ok_or_else(|| format!("object \"{object}\" is not a rigid body"))?;
+        let colliders: Vec<_> = rigid
+            .bodies
+            .get(body.0)
+            .ok_or_else(|| format!("object \"{object}\": its body is gone"))?
+            .colliders()
+            .to_vec();
+        for c in colliders {
+            if let Some(c) = rigid.colliders.get_mut(c) {
+                c.set_friction(f as f32);
+            }
+        }
+        Ok(())
+    }
+
+    /// Draws and applies one event (`Startup`/`Interval` wrappers run their event now);
+    /// `custom` is the configured event of an `Event` leaf.
+    fn apply(
+        &mut self,
+        robot_name: &str,
+        event: &str,
+        e: &EventDesc,
+        custom: Option<&Arc<dyn TaskEvent>>,
+    ) -> Result<(), String> {
         match e {
             EventDesc::Startup(inner) | EventDesc::Interval { event: inner, .. } => {
-                self.apply(robot_name, event, inner)
+                self.apply(robot_name, event, inner, custom)
+            }
+            EventDesc::Event { event: name, .. } => {
+                let configured = custom
+                    .ok_or_else(|| format!("registered event \"{name}\" was not configured"))?;
+                let mut ctx = EventCtx {
+                    ops: self,
+                    event,
+                    robot: robot_name,
+                };
+                configured.apply(&mut ctx)
             }
             EventDesc::RobotPose { xy, yaw, carry } => {
                 let dx = self.rng.range(-xy, *xy);
@@ -170,24 +212,7 @@ impl EventWorld<'_, '_> {
             }
             EventDesc::Friction { object, range } => {
                 let f = self.rng.range(range.0, range.1);
-                let rigid = self.rigid.as_deref_mut().ok_or("no rigid world")?;
-                let (_, body) = self
-                    .bodies
-                    .iter()
-                    .find(|(o, _)| o.name == *object)
-                    .ok_or_else(|| format!("object \"{object}\" is not a rigid body"))?;
-                let colliders: Vec<_> = rigid
-                    .bodies
-                    .get(body.0)
-                    .ok_or_else(|| format!("object \"{object}\": its body is gone"))?
-                    .colliders()
-                    .to_vec();
-                for c in colliders {
-                    if let Some(c) = rigid.colliders.get_mut(c) {
-                        c.set_friction(f as f32);
-                    }
-                }
-                Ok(())
+                self.set_friction(object, f)
             }
             EventDesc::ObjectOffset { object, xy } => {
                 let d = Vector3::new(self.rng.range(-xy, *xy), self.rng.range(-xy, *xy), 0.0);
@@ -229,10 +254,36 @@ impl EventWorld<'_, '_> {
     }
 
     /// Applies `e` and reports a failure as the env's error.
-    fn run(&mut self, robot_name: &str, name: &str, e: &EventDesc) {
-        if let Err(msg) = self.apply(robot_name, name, e) {
+    fn run(
+        &mut self,
+        robot_name: &str,
+        name: &str,
+        e: &EventDesc,
+        custom: Option<&Arc<dyn TaskEvent>>,
+    ) {
+        if let Err(msg) = self.apply(robot_name, name, e, custom) {
             self.errors.raise(format!("task event \"{name}\": {msg}"));
         }
+    }
+}
+
+impl EventOps for EventWorld<'_, '_> {
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        self.rng.range(lo, hi)
+    }
+    fn push(&mut self, event: &str, object: &str, dv: Vector3<f64>) -> Result<(), String> {
+        EventWorld::push(self, event, object, dv)
+    }
+    fn move_object(
+        &mut self,
+        event: &str,
+        object: &str,
+        iso: &Isometry3<f64>,
+    ) -> Result<(), String> {
+        EventWorld::move_object(self, event, object, iso)
+    }
+    fn set_friction(&mut self, object: &str, friction: f64) -> Result<(), String> {
+        EventWorld::set_friction(self, object, friction)
     }
 }
 
@@ -268,7 +319,7 @@ pub(super) fn task_reset(
             .iter()
             .filter(|(_, e)| matches!(e, EventDesc::Startup(_)))
         {
-            ew.run(&m.robot, name, e);
+            ew.run(&m.robot, name, e, m.custom_events.get(name));
         }
         *ew.rng = saved;
     }
@@ -292,7 +343,7 @@ pub(super) fn task_reset(
     }
     for (name, e) in &m.events {
         if !matches!(e, EventDesc::Startup(_) | EventDesc::Interval { .. }) {
-            ew.run(&m.robot, name, e);
+            ew.run(&m.robot, name, e, m.custom_events.get(name));
         }
     }
     // The first run of every interval event.
@@ -334,7 +385,7 @@ pub(super) fn task_interval_events(
         if clock.time + 1e-9 < *next {
             continue;
         }
-        ew.run(&m.robot, name, e);
+        ew.run(&m.robot, name, e, m.custom_events.get(name.as_str()));
         let gap = ew.rng.range(every.0, every.1);
         *next += gap;
         if *next <= clock.time {

@@ -116,6 +116,8 @@ pub struct TaskModel {
     pub groups: Vec<Group>,
     /// Reset events in order.
     pub events: Vec<(String, EventDesc)>,
+    /// The registered events (`Event(...)` entries) configured, by their key in `events`.
+    pub custom_events: BTreeMap<String, Arc<dyn crate::events::TaskEvent>>,
     /// Named points and targets with their ids (published in [`TaskPoints`]).
     pub named: Vec<(String, PointId)>,
     /// The surface triangles of every deformable object, by name, as its body kind gives them

@@ -223,8 +223,11 @@ impl SceneSection for TaskSection {
         }
         crate::expert::check_route(&desc)
             .map_err(|(field, value, msg)| serr(&format!("{path}.{field}"), value, msg))?;
+        let mut custom_events = BTreeMap::new();
         for (n, e) in &desc.events {
-            check_event(&format!("{path}.events[\"{n}\"]"), e, &cfg, None)?;
+            if let Some(c) = check_event(ctx, &format!("{path}.events[\"{n}\"]"), e, &cfg, None)? {
+                custom_events.insert(n.clone(), c);
+            }
         }
         let points = cfg.table;
         let success_bonus = desc.success_bonus.unwrap_or(0.0);
@@ -243,6 +246,7 @@ impl SceneSection for TaskSection {
             named: named_ids,
             robot: desc.robot.clone().unwrap_or_else(|| "robot".to_string()),
             events: desc.events.clone().into_iter().collect(),
+            custom_events,
             desc,
             points,
             targets,
