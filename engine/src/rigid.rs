@@ -641,6 +641,21 @@ fn collider_builder(shape: &RigidShape) -> ColliderBuilder {
     }
 }
 
+/// Tries the convex decomposition a dynamic or kinematic mesh body gets (parry's VHACD): parry
+/// panics on some meshes (a degenerate convex hull), which must be a scene error, not a crash.
+pub(crate) fn check_convex_decomposition(mesh: &crate::shapes::SurfaceMesh) -> Result<(), String> {
+    let (v, i) = mesh_to_rapier(mesh);
+    std::panic::catch_unwind(|| {
+        let _ = ColliderBuilder::convex_decomposition(&v, &i);
+    })
+    .map_err(|p| {
+        p.downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_default()
+    })
+}
+
 fn mesh_to_rapier(
     mesh: &crate::shapes::SurfaceMesh,
 ) -> (Vec<rapier3d::math::Vector>, Vec<[u32; 3]>) {

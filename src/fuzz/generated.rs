@@ -6,7 +6,13 @@
 
 use modesuite_engine::rng::EnvRng;
 
-/// A random scene, as RON text, from `seed`.
+/// The surface mesh file generated scenes may name (written into the folder they compile in).
+pub const SURFACE_MESH: &str = "fuzz-tetra.obj";
+/// The volume mesh file generated scenes may name.
+pub const VOLUME_MESH: &str = "fuzz-tets.msh";
+
+/// A random scene, as RON text, from `seed`. Its `Mesh` shapes name [`SURFACE_MESH`] and
+/// [`VOLUME_MESH`], resolved against the folder the scene compiles in.
 pub fn random_scene(seed: u64) -> String {
     let mut g = Gen(EnvRng::from_seed(seed));
     let substeps = 1 + g.below(4);
@@ -15,7 +21,8 @@ pub fn random_scene(seed: u64) -> String {
             .to_string(),
     ];
     let mut materials = Vec::new();
-    let n = 1 + g.below(4);
+    let n = 1 + g.below(3);
+    let mut solids = 0;
     for i in 0..=n {
         materials.push(format!(
             "\"m{i}\": (friction: {}, density: {})",
@@ -33,7 +40,13 @@ pub fn random_scene(seed: u64) -> String {
             g.f(-3.1, 3.1),
             g.f(-3.1, 3.1)
         );
-        let (shape, body) = match g.below(3) {
+        // At most one FEM solid: two solids in contact can take seconds per step (docs/reliability.md).
+        let kind = match g.below(3) {
+            1 if solids > 0 => 2,
+            k => k,
+        };
+        solids += usize::from(kind == 1);
+        let (shape, body) = match kind {
             0 => {
                 let body = match g.below(3) {
                     0 => "Static".to_string(),
@@ -80,7 +93,8 @@ impl Gen {
     }
 
     fn rigid_shape(&mut self) -> String {
-        match self.below(4) {
+        match self.below(5) {
+            4 => format!("Mesh(file: \"{SURFACE_MESH}\")"),
             0 => format!(
                 "Box(size: ({}, {}, {}))",
                 self.f(0.02, 0.5),
@@ -102,7 +116,43 @@ impl Gen {
     }
 
     fn solid_shape(&mut self) -> String {
-        match self.below(5) {
+        match self.below(9) {
+            5 => format!(
+                "Sweep(profile: Circle(radius: {}, segments: 6, rings: 1), path: Polyline(points: [(0.0, 0.0, 0.0), ({}, {}, 0.0), ({}, {}, {})]), segments: {})",
+                self.f(0.005, 0.03),
+                self.f(0.1, 0.3),
+                self.f(-0.1, 0.1),
+                self.f(0.35, 0.6),
+                self.f(-0.2, 0.2),
+                self.f(-0.1, 0.1),
+                6 + self.below(20)
+            ),
+            6 => format!(
+                "Sweep(profile: Polygon(points: [(0.0, 0.0), ({}, 0.0), (0.0, {})]), path: Arc(radius: {}, angle: {}), segments: {})",
+                self.f(0.01, 0.04),
+                self.f(0.01, 0.04),
+                self.f(0.1, 0.4),
+                self.f(0.5, 3.0),
+                6 + self.below(18)
+            ),
+            7 => format!(
+                "Sweep(profile: Circle(radius: {}, segments: 6, rings: 1), path: Helix(radius: {}, pitch: {}, turns: {}), segments: {})",
+                self.f(0.005, 0.02),
+                self.f(0.06, 0.2),
+                self.f(0.05, 0.15),
+                self.f(0.5, 2.5),
+                8 + self.below(24)
+            ),
+            8 => match self.below(2) {
+                0 => format!(
+                    "Revolve(profile: Rect(width: {}, height: {}, divisions: Some((2, 1))), radius: {}, angle: {})",
+                    self.f(0.01, 0.04),
+                    self.f(0.005, 0.03),
+                    self.f(0.08, 0.3),
+                    self.f(1.0, 6.283)
+                ),
+                _ => format!("Mesh(file: \"{VOLUME_MESH}\")"),
+            },
             0 => format!(
                 "Box(size: ({}, {}, {}), divisions: ({}, {}, {}))",
                 self.f(0.05, 0.8),

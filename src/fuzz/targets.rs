@@ -171,6 +171,10 @@ fn workdir() -> &'static Path {
     DIR.get_or_init(|| {
         let dir = std::env::temp_dir().join(format!("modesuite-fuzz-{}", std::process::id()));
         let _ = std::fs::create_dir_all(&dir);
+        let _ = std::fs::write(dir.join(super::generated::SURFACE_MESH), CLOSED_TETRA_OBJ);
+        // An open, non-manifold surface (the `obj` seed), for scenes that name it.
+        let _ = std::fs::write(dir.join("fuzz-open.obj"), OBJ);
+        let _ = std::fs::write(dir.join(super::generated::VOLUME_MESH), MSH);
         for f in files(&scenes_dir(), ".task.ron")
             .into_iter()
             .chain(files(&assets_dir().join("robots"), ".urdf"))
@@ -445,7 +449,13 @@ const GENERATED_STEPS: usize = 20;
 
 fn run_generated(b: &[u8]) -> Result<(), String> {
     let text = super::generated::random_scene(seed_of(b));
-    let mut env = crate::make::env_from_text(&text).map_err(|e| e.to_string())?;
+    let desc = scene::parse_str(&text, "generated.scene.ron").map_err(|e| e.to_string())?;
+    let mut app = default_app();
+    let model = app
+        .compile_scene(&desc, &SceneSource::in_memory(workdir()))
+        .map_err(|e| e.to_string())?;
+    app.spawn_scene(model).map_err(|e| e.to_string())?;
+    let mut env = Env::new(app);
     let (obs, _) = env.reset(Some(seed_of(b)));
     assert_finite("reset observation", &obs);
     let action = vec![0.0f32; env.spaces().action.flat_dim()];
@@ -648,6 +658,10 @@ fn run_state_body(b: &[u8]) -> Result<(), String> {
 
 const OBJ: &str = "# a unit tetrahedron and a quad\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 1 0\n\
 vt 0 0\nvn 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\nf 2/1 5/1 3/1\nf -1 -2 -3\n";
+
+/// A closed tetrahedron, 10 cm legs (what generated scenes' rigid `Mesh` bodies load).
+const CLOSED_TETRA_OBJ: &str =
+    "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
 
 const STL_ASCII: &str = "solid t\nfacet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 1 0\n\
 vertex 1 0 0\nendloop\nendfacet\nfacet normal 0 -1 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n\

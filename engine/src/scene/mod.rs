@@ -425,6 +425,15 @@ fn rigid_shape(
             if kind == RigidKind::Static {
                 RigidShape::TriMesh(mesh)
             } else {
+                crate::rigid::check_convex_decomposition(&mesh).map_err(|why| {
+                    SceneError::semantic(
+                        format!("{path}.shape"),
+                        "(mesh)",
+                        format!(
+                            "a mesh a moving rigid body can use: its convex decomposition failed ({why}); make the body Static (a triangle mesh) or give it a closed, non-degenerate surface"
+                        ),
+                    )
+                })?;
                 RigidShape::ConvexDecomposition(mesh)
             }
         }
