@@ -149,7 +149,7 @@ impl Gen {
                     self.f(0.01, 0.04),
                     self.f(0.005, 0.03),
                     self.f(0.08, 0.3),
-                    self.f(1.0, 6.283)
+                    self.f(1.0, 6.2)
                 ),
                 _ => format!("Mesh(file: \"{VOLUME_MESH}\")"),
             },
