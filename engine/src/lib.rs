@@ -59,6 +59,18 @@ pub use env::{Env, EnvInfo, Space, Spaces, StepOutcome, VecEnv, VecStep};
 pub use rigid::{DeformableSystems, RigidContext, RigidPlugin, RigidSystems};
 pub use scene::{SceneDesc, SceneError, SceneModel, SceneSource};
 
+/// Runs `f`, turning a panic into `Err` with its message (the payload's text, or empty): for
+/// third-party code that asserts on input it should have refused (rapier on inconsistent sets,
+/// parry on degenerate meshes), so that the caller can report an error instead of unwinding.
+pub fn catch_panic<R>(f: impl FnOnce() -> R) -> Result<R, String> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
+        p.downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_default()
+    })
+}
+
 /// Re-exports of the math and ECS crates, so plugins use the same versions.
 pub mod deps {
     pub use bevy_ecs;

@@ -403,7 +403,7 @@ impl RigidContext {
         }
         // rapier asserts its sets' internal consistency; sets that are not consistent (a state
         // file edited by hand and re-sealed) must end the episode with a reason, not the process.
-        let stepped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let stepped = crate::catch_panic(|| {
             self.pipeline.step(
                 vec_to_rapier(&self.gravity),
                 &self.params,
@@ -419,13 +419,8 @@ impl RigidContext {
                 &(),
                 &(),
             )
-        }));
-        if let Err(p) = stepped {
-            let why = p
-                .downcast_ref::<String>()
-                .cloned()
-                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-                .unwrap_or_default();
+        });
+        if let Err(why) = stepped {
             // Fresh derived structures, so what reads contacts before the reset does not meet
             // the inconsistent ones.
             self.pipeline = PhysicsPipeline::new();
@@ -634,26 +629,18 @@ fn collider_builder(shape: &RigidShape) -> ColliderBuilder {
             let (v, i) = mesh_to_rapier(mesh);
             ColliderBuilder::trimesh(v, i).unwrap_or_else(|_| ColliderBuilder::ball(1e-3))
         }
-        RigidShape::ConvexDecomposition(mesh) => {
-            let (v, i) = mesh_to_rapier(mesh);
-            ColliderBuilder::convex_decomposition(&v, &i)
-        }
+        RigidShape::ConvexDecomposition { parts, .. } => ColliderBuilder::new(parts.clone()),
     }
 }
 
-/// Tries the convex decomposition a dynamic or kinematic mesh body gets (parry's VHACD): parry
-/// panics on some meshes (a degenerate convex hull), which must be a scene error, not a crash.
-pub(crate) fn check_convex_decomposition(mesh: &crate::shapes::SurfaceMesh) -> Result<(), String> {
+/// The convex decomposition (parry's VHACD) a dynamic or kinematic mesh body collides with,
+/// computed once when the scene compiles and shared by every env's collider. parry panics on
+/// some meshes (a degenerate convex hull), which must be a scene error, not a crash.
+pub(crate) fn convex_decomposition(
+    mesh: &crate::shapes::SurfaceMesh,
+) -> Result<SharedShape, String> {
     let (v, i) = mesh_to_rapier(mesh);
-    std::panic::catch_unwind(|| {
-        let _ = ColliderBuilder::convex_decomposition(&v, &i);
-    })
-    .map_err(|p| {
-        p.downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_default()
-    })
+    crate::catch_panic(|| SharedShape::convex_decomposition(&v, &i))
 }
 
 fn mesh_to_rapier(
@@ -772,14 +759,14 @@ impl RigidContext {
         trial.body_ids = self.body_ids.clone();
         let dt = f64::from(self.params.dt).max(1e-4);
         trial.step(dt)?;
-        let read = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let read = crate::catch_panic(|| {
             let mut n = trial.narrow_phase.contact_pairs().count();
             for (h, _) in trial.colliders.iter() {
                 n += trial.narrow_phase.contact_pairs_with(h).count();
                 n += trial.narrow_phase.intersection_pairs_with(h).count();
             }
             n
-        }));
+        });
         read.map(|_| ()).map_err(|_| {
             "the rigid world's contact graph is inconsistent (a damaged file?)".to_string()
         })

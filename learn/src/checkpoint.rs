@@ -48,7 +48,8 @@ pub struct Checkpoint {
     sections: BTreeMap<String, Vec<u8>>,
 }
 
-fn fnv1a(bytes: &[u8]) -> u64 {
+/// 64-bit FNV-1a of `bytes`: the checksum that ends a checkpoint file.
+pub fn fnv1a(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for b in bytes {
         h ^= *b as u64;

@@ -13,7 +13,6 @@
 
 mod convert;
 
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -48,12 +47,12 @@ fn make_err(e: MakeError) -> PyErr {
 
 /// Runs `f`, turning a panic into an error message.
 fn guarded<R>(f: impl FnOnce() -> R) -> Result<R, String> {
-    catch_unwind(AssertUnwindSafe(f)).map_err(|p| {
-        let what = p
-            .downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_else(|| "unknown panic".into());
+    modesuite::engine::catch_panic(f).map_err(|what| {
+        let what = if what.is_empty() {
+            "unknown panic".to_string()
+        } else {
+            what
+        };
         format!("internal error in modesuite (please report): {what}")
     })
 }

@@ -7,7 +7,6 @@ use std::time::{Duration, Instant};
 use serde_json::json;
 
 use super::{io, CliError};
-use crate::fuzz::targets::task_ids;
 use crate::make::env_for_target;
 use modesuite_tasks::expert::{make_policy, PolicyKind};
 
@@ -62,7 +61,7 @@ pub(super) fn soak(args: &SoakArgs, out: &mut dyn Write) -> Result<(), CliError>
         ));
     }
     let mut envs = Vec::new();
-    for id in task_ids() {
+    for id in modesuite_tasks::all_ids() {
         let mut env = env_for_target(&id, None)?;
         let mut policy = make_policy(PolicyKind::Random, &env).map_err(CliError::runtime)?;
         env.reset(Some(args.seed));

@@ -17,7 +17,6 @@ pub mod generated;
 pub mod mutate;
 pub mod targets;
 
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -106,11 +105,12 @@ pub fn regressions(target: &str) -> Vec<(PathBuf, Vec<u8>)> {
 
 /// Runs one input: `Ok(Ok)` accepted, `Ok(Err)` refused, `Err(message)` panicked.
 pub fn run_one(t: &Target, input: &[u8]) -> Result<Result<(), String>, String> {
-    catch_unwind(AssertUnwindSafe(|| (t.run)(input))).map_err(|p| {
-        p.downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_else(|| "panic without a message".into())
+    crate::engine::catch_panic(|| (t.run)(input)).map_err(|m| {
+        if m.is_empty() {
+            "panic without a message".into()
+        } else {
+            m
+        }
     })
 }
 
@@ -197,7 +197,8 @@ pub fn run_campaign(t: &'static Target, c: &Campaign, progress: &mut dyn FnMut(&
     corpus.extend(regressions(t.name).into_iter().map(|(_, b)| b));
     let dog = Watchdog::start(t.name, c.hang_limit, c.out.clone());
     quiet_panics_in_campaigns();
-    let mut mutator = mutate::Mutator::new(c.seed ^ fnv1a(t.name.as_bytes()));
+    let mut mutator =
+        mutate::Mutator::new(c.seed ^ modesuite_learn::checkpoint::fnv1a(t.name.as_bytes()));
     let one = |input: &[u8], report: &mut Report| {
         dog.begin(input);
         let t0 = Instant::now();
@@ -256,12 +257,4 @@ fn quiet_panics_in_campaigns() {
             }
         }));
     });
-}
-
-/// 64-bit FNV-1a of bytes (a per-target salt for the mutator's seed; the checksum of training
-/// checkpoints).
-fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    })
 }

@@ -249,54 +249,37 @@ fn run_scene(b: &[u8]) -> Result<(), String> {
     scene_env(text(b)?, &workdir().join("fuzz.scene.ron"))
 }
 
-/// The Franka Place scene with its task section cut out: (text before, text after).
-fn place_scene_around_task() -> &'static (String, String) {
-    static PARTS: OnceLock<(String, String)> = OnceLock::new();
-    PARTS.get_or_init(|| {
-        let s = String::from_utf8(read(&scenes_dir().join("place/franka.scene.ron")))
-            .unwrap_or_default();
-        let key = "\"task\":";
-        let Some(k) = s.find(key) else {
-            return (s, String::new());
-        };
-        let open = k + key.len();
-        let mut depth = 0i32;
-        let mut end = s.len();
-        for (i, c) in s[open..].char_indices() {
-            match c {
-                '(' => depth += 1,
-                ')' => {
-                    depth -= 1;
-                    if depth == 0 {
-                        end = open + i + 1;
-                        break;
-                    }
-                }
-                _ => {}
-            }
-        }
-        (s[..open].to_string(), s[end..].to_string())
+/// The Franka Place scene, parsed once.
+fn place_desc() -> Result<&'static scene::SceneDesc, String> {
+    static DESC: OnceLock<Result<scene::SceneDesc, String>> = OnceLock::new();
+    DESC.get_or_init(|| {
+        scene::load_file(&scenes_dir().join("place/franka.scene.ron"))
+            .map(|(d, _)| d)
+            .map_err(|e| e.to_string())
     })
+    .as_ref()
+    .map_err(Clone::clone)
 }
 
 fn task_seeds() -> Vec<Vec<u8>> {
-    let (before, after) = place_scene_around_task();
-    let full =
-        String::from_utf8(read(&scenes_dir().join("place/franka.scene.ron"))).unwrap_or_default();
-    let own = full
-        .strip_prefix(before.as_str())
-        .and_then(|r| r.strip_suffix(after.as_str()))
-        .unwrap_or_default()
-        .to_string();
-    std::iter::once(own.into_bytes())
+    let own = place_desc()
+        .ok()
+        .and_then(|d| d.extensions.get("task"))
+        .map(|t| t.get_ron().as_bytes().to_vec());
+    own.into_iter()
         .chain(contents(&scenes_dir(), ".task.ron"))
         .collect()
 }
 
+/// The Franka Place scene with its `task` section replaced by the input.
 fn run_task(b: &[u8]) -> Result<(), String> {
-    let (before, after) = place_scene_around_task();
-    let text = format!("{before} {} {after}", text(b)?);
-    scene_env(&text, &workdir().join("fuzz.scene.ron"))
+    let mut desc = place_desc()?.clone();
+    let section = ron::value::RawValue::from_boxed_ron(text(b)?.into())
+        .map_err(|e| format!("task section: {e}"))?;
+    desc.extensions.insert("task".into(), section);
+    let mut source = SceneSource::in_memory(workdir());
+    source.asset_roots = scene::default_asset_roots();
+    spawn_and_exercise(&desc, &source)
 }
 
 fn robot_seeds() -> Vec<Vec<u8>> {
@@ -468,40 +451,9 @@ fn run_generated(b: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// Every task id (from the scenes folder: `<task>/<robot>.scene.ron`).
-pub fn task_ids() -> Vec<String> {
-    let mut ids = Vec::new();
-    for t in files(&scenes_dir(), ".scene.ron") {
-        let Some(task) = t.parent().and_then(|p| p.file_name()) else {
-            continue;
-        };
-        let Some(robot) = t
-            .file_name()
-            .and_then(|f| f.to_str()?.strip_suffix(".scene.ron"))
-        else {
-            continue;
-        };
-        if task == "examples" {
-            continue;
-        }
-        let cap = |s: &str| {
-            let mut c = s.chars();
-            c.next()
-                .map(|f| f.to_uppercase().chain(c).collect::<String>())
-                .unwrap_or_default()
-        };
-        ids.push(format!(
-            "MoDe-{}-{}-v0",
-            cap(robot),
-            cap(&task.to_string_lossy())
-        ));
-    }
-    ids
-}
-
 fn run_tasks(b: &[u8]) -> Result<(), String> {
     let seed = seed_of(b);
-    for id in task_ids() {
+    for id in modesuite_tasks::all_ids() {
         let mut env = task_env(&id)?;
         let mut policy = make_policy(PolicyKind::Random, &env)?;
         let (obs, _) = env.reset(Some(seed));
@@ -594,7 +546,7 @@ fn run_checkpoint(b: &[u8]) -> Result<(), String> {
 fn resealed_checkpoint(b: &[u8]) -> Vec<u8> {
     let n = b.len().saturating_sub(8);
     let mut out = b[..n].to_vec();
-    out.extend(super::fnv1a(&out).to_le_bytes());
+    out.extend(modesuite_learn::checkpoint::fnv1a(&out).to_le_bytes());
     out
 }
 
@@ -697,13 +649,3 @@ const MSH: &str = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 5 1 5\n3 1 0 
 
 const MEDIT: &str = "MeshVersionFormatted 2\nDimension\n3\nVertices\n5\n0 0 0 1\n1 0 0 1\n\
 0 1 0 1\n0 0 1 1\n1 1 1 1\nTriangles\n1\n1 2 3 1\nTetrahedra\n2\n1 2 3 4 1\n2 3 4 5 1\nEnd\n";
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn sixteen_task_ids() {
-        let ids = super::task_ids();
-        assert_eq!(ids.len(), 16, "{ids:?}");
-        assert!(ids.contains(&"MoDe-Spot-Curtain-v0".to_string()));
-    }
-}

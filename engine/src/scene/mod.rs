@@ -151,7 +151,13 @@ pub enum RigidShape {
     /// A triangle mesh (static bodies).
     TriMesh(Arc<SurfaceMesh>),
     /// A convex decomposition of a triangle mesh (dynamic and kinematic bodies).
-    ConvexDecomposition(Arc<SurfaceMesh>),
+    ConvexDecomposition {
+        /// The mesh (what renderers draw).
+        mesh: Arc<SurfaceMesh>,
+        /// Its convex parts, computed once when the scene compiles (every env's collider
+        /// shares them).
+        parts: rapier3d::prelude::SharedShape,
+    },
 }
 
 /// A compiled rigid object.
@@ -425,7 +431,7 @@ fn rigid_shape(
             if kind == RigidKind::Static {
                 RigidShape::TriMesh(mesh)
             } else {
-                crate::rigid::check_convex_decomposition(&mesh).map_err(|why| {
+                let parts = crate::rigid::convex_decomposition(&mesh).map_err(|why| {
                     SceneError::semantic(
                         format!("{path}.shape"),
                         "(mesh)",
@@ -434,7 +440,7 @@ fn rigid_shape(
                         ),
                     )
                 })?;
-                RigidShape::ConvexDecomposition(mesh)
+                RigidShape::ConvexDecomposition { mesh, parts }
             }
         }
     })

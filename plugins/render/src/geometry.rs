@@ -437,7 +437,7 @@ impl SceneExtractor {
         let om = index.and_then(|i| self.model.objects.get(i as usize));
         // Scene objects whose collider approximates a visual mesh draw the mesh.
         if let Some(BodyModel::Rigid(r)) = om.map(|o| &o.body) {
-            if let RigidShape::ConvexDecomposition(m) = &r.shape {
+            if let RigidShape::ConvexDecomposition { mesh: m, .. } = &r.shape {
                 return Some(ColliderVisual {
                     mesh: Arc::new(LocalMesh::with_creases(&m.positions, &m.triangles, 30.0)),
                     style,

@@ -58,7 +58,10 @@ impl VideoWriter {
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
-        let tmp = partial_path(path, ext.as_deref().unwrap_or("video"));
+        let tmp = modesuite_engine::fsio::partial_path(
+            path,
+            &format!(".{}", ext.as_deref().unwrap_or("video")),
+        );
         let sink = match ext.as_deref() {
             Some("gif") => {
                 if width > u16::MAX as u32 || height > u16::MAX as u32 {
@@ -211,19 +214,6 @@ impl Drop for VideoWriter {
         // After a successful `finish` the temporary file was renamed: nothing to remove.
         let _ = std::fs::remove_file(&self.tmp);
     }
-}
-
-/// The temporary file a video is written to: beside `path`, hidden, ending in `.EXT` so
-/// ffmpeg picks the container from it.
-fn partial_path(path: &Path, ext: &str) -> PathBuf {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .map_or("video".into(), |n| n.to_string_lossy());
-    dir.join(format!(".{name}.{}.partial.{ext}", std::process::id()))
 }
 
 /// Writes an RGB image (`height x width x 3` u8) as a PNG file.

@@ -3,7 +3,6 @@
 //! whose links form one tree.
 
 use std::collections::HashMap;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Component, Path, PathBuf};
 
 use modesuite_engine::deps::nalgebra::{Isometry3, Matrix3, Translation3, Unit, Vector3};
@@ -351,7 +350,7 @@ pub fn parse_urdf(
 ) -> Result<UrdfModel, RobotError> {
     // urdf-rs does not resolve package:// in read_from_string, but a parser panic must never
     // reach the caller: catch it as a defence.
-    let parsed = catch_unwind(AssertUnwindSafe(|| urdf_rs::read_from_string(text)));
+    let parsed = modesuite_engine::catch_panic(|| urdf_rs::read_from_string(text));
     let robot = match parsed {
         Ok(Ok(r)) => r,
         Ok(Err(e)) => {
