@@ -11,5 +11,7 @@ cargo test --locked --workspace --exclude modesuite-python
 # the compiled example plugins the Python tests load
 cargo build --locked -p plugin-trefoil -p plugin-panics
 export MODESUITE_PLUGIN_DIR="$CARGO_TARGET_DIR/debug"
+# the command line the Python tests compare with (built by `cargo test` above)
+export MODESUITE_BIN="$CARGO_TARGET_DIR/debug/modesuite"
 source scripts/python.sh
 "$MODESUITE_VENV/bin/python" -m pytest -q -W error python/tests

@@ -115,6 +115,59 @@ def _action_error(action: Any, expected: str) -> ValueError:
     return ValueError(f"action of shape {got} and dtype {dtype}: expected {expected}")
 
 
+def _reset_args(
+    n: int, seed: int | Sequence[int | None] | None, options: dict[str, Any] | None
+) -> tuple[list[int | None], list[bool] | None]:
+    """A vector reset's ``seed`` and ``options`` as one seed per env (an int seed ``s`` gives
+    env ``i`` the seed ``s + i``) and the ``reset_mask`` as a list (None: every env), checked as
+    Gymnasium's vector envs check them."""
+    if seed is None:
+        seeds: list[int | None] = [None] * n
+    elif isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+        base = _seed(seed)
+        seeds = [_seed(base + i, f"seed + {i}") for i in range(n)]
+    else:
+        seeds = [_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
+        if len(seeds) != n:
+            raise ValueError(
+                f"If seeds are passed as a list the length must match num_envs={n} "
+                f"but got length={len(seeds)}."
+            )
+    if options is None or "reset_mask" not in options:
+        return seeds, None
+    mask = options["reset_mask"]
+    if not isinstance(mask, np.ndarray):
+        raise TypeError(f"`options['reset_mask']` must be a numpy array, got {type(mask)}")
+    if mask.shape != (n,):
+        raise ValueError(f"`options['reset_mask']` must have shape `({n},)`, got {mask.shape}")
+    if mask.dtype != np.bool_:
+        raise TypeError(f"`options['reset_mask']` must have `dtype=np.bool_`, got {mask.dtype}")
+    if not np.any(mask):
+        raise ValueError(
+            "`options['reset_mask']` must contain a boolean array with at least one "
+            f"True value, got reset_mask={mask}"
+        )
+    return seeds, [bool(m) for m in mask]
+
+
+def _vector_actions(space: gym.Space, n: int, actions: Any) -> np.ndarray:
+    """A vector step's ``actions`` for ``n`` envs of ``space`` as the float32 ``n x act_dim``
+    rows the simulator steps (a ``Discrete`` action as one float), checked."""
+    if isinstance(space, spaces.Discrete):
+        k = space.n
+        a = np.asarray(actions)
+        if a.dtype.kind not in "iu" or a.shape != (n,):
+            raise _action_error(actions, f"shape ({n},), integers in 0..{k}")
+        if np.any(a < 0) or np.any(a >= k):
+            raise ValueError(f"actions = {a}: integers in 0..{k} (Discrete({k}))")
+        return a.astype(np.float32).reshape(n, 1)
+    shape = (n, *space.shape)
+    a = np.asarray(actions)
+    if a.dtype.kind not in "fiu" or a.shape != shape:
+        raise _action_error(actions, f"shape {shape}, a float array (float32)")
+    return _as_float32(a)
+
+
 class ModeSuiteEnv(gym.Env):
     """One modesuite environment as a ``gymnasium.Env``.
 
@@ -294,62 +347,15 @@ class ModeSuiteVectorEnv(VectorEnv):
         seed: int | Sequence[int | None] | None = None,
         options: dict[str, Any] | None = None,
     ) -> tuple[Any, dict[str, Any]]:
-        n = self.num_envs
-        if seed is None:
-            seeds: list[int | None] = [None] * n
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
-            base = _seed(seed)
-            seeds = [_seed(base + i, f"seed + {i}") for i in range(n)]
-        else:
-            seeds = [_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
-            if len(seeds) != n:
-                raise ValueError(
-                    f"If seeds are passed as a list the length must match num_envs={n} "
-                    f"but got length={len(seeds)}."
-                )
+        seeds, mask = _reset_args(self.num_envs, seed, options)
         if isinstance(seed, (int, np.integer)):
             super().reset(seed=int(seed))
-        mask = None
-        if options is not None and "reset_mask" in options:
-            mask = options["reset_mask"]
-            if not isinstance(mask, np.ndarray):
-                raise TypeError(f"`options['reset_mask']` must be a numpy array, got {type(mask)}")
-            if mask.shape != (n,):
-                raise ValueError(
-                    f"`options['reset_mask']` must have shape `({n},)`, got {mask.shape}"
-                )
-            if mask.dtype != np.bool_:
-                raise TypeError(
-                    f"`options['reset_mask']` must have `dtype=np.bool_`, got {mask.dtype}"
-                )
-            if not np.any(mask):
-                raise ValueError(
-                    "`options['reset_mask']` must contain a boolean array with at least one "
-                    f"True value, got reset_mask={mask}"
-                )
-            mask = [bool(m) for m in mask]
         return self._core.reset(seeds, mask)
 
     def step(
         self, actions: Any
     ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        return self._core.step(self._actions(actions))
-
-    def _actions(self, actions: Any) -> np.ndarray:
-        n = self.num_envs
-        if isinstance(self.single_action_space, spaces.Discrete):
-            k = self.single_action_space.n
-            a = np.asarray(actions)
-            if a.dtype.kind not in "iu" or a.shape != (n,):
-                raise _action_error(actions, f"shape ({n},), integers in 0..{k}")
-            if np.any(a < 0) or np.any(a >= k):
-                raise ValueError(f"actions = {a}: integers in 0..{k} (Discrete({k}))")
-            return a.astype(np.float32).reshape(n, 1)
-        shape = (n, *self.single_action_space.shape)
-        a = np.asarray(actions)
-        if a.dtype.kind not in "fiu" or a.shape != shape:
-            raise _action_error(actions, f"shape {shape}, a float array (float32)")
-        return _as_float32(a)
+        return self._core.step(_vector_actions(self.single_action_space, self.num_envs, actions))
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         if self.render_mode != "rgb_array":

@@ -23,3 +23,12 @@ def plugin_dir() -> Path:
     if not d:
         pytest.fail("MODESUITE_PLUGIN_DIR is not set: run the tests through scripts/test.sh")
     return Path(d)
+
+
+@pytest.fixture(scope="session")
+def modesuite_bin() -> Path:
+    """The `modesuite` command that scripts/test.sh built (MODESUITE_BIN)."""
+    b = os.environ.get("MODESUITE_BIN")
+    if not b:
+        pytest.fail("MODESUITE_BIN is not set: run the tests through scripts/test.sh")
+    return Path(b)
