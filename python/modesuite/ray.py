@@ -41,7 +41,7 @@ from gymnasium.vector.utils import batch_space
 
 from .envs import ModeSuiteEnv, ModeSuiteVectorEnv, _reset_args, _vector_actions
 
-__all__ = ["ExpertPolicy", "RayVectorEnv", "evaluate"]
+__all__ = ["ExpertPolicy", "RayVectorEnv", "TrainedPolicy", "evaluate"]
 
 #: Tries to bring a dead worker back (each waits for Ray's restart) before the step fails.
 RESTART_TRIES = 5
@@ -449,6 +449,36 @@ class ExpertPolicy:
 
     def __call__(self, obs: Any) -> Any:
         return self._env.expert_action()
+
+
+class TrainedPolicy:
+    """A trained policy's folder (``modesuite train --out DIR``, or one of ``policies/``) as a
+    policy for :func:`evaluate`: the path is what travels to the workers, each of which loads
+    the policy once (the folder must be readable on every node). Loaded on the driver too, so
+    that a bad folder fails here; :attr:`target` and :attr:`actions` are the task and action
+    modes it was trained with (pass ``actions=policy.actions`` to :func:`evaluate`)."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        from . import Policy
+
+        self.path = os.fspath(path)
+        self._policy: Any = Policy(self.path)
+        self.target: str = self._policy.target
+        self.actions: str | None = self._policy.actions
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"path": self.path, "target": self.target, "actions": self.actions}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._policy = None
+
+    def __call__(self, obs: Any) -> np.ndarray:
+        if self._policy is None:
+            from . import Policy
+
+            self._policy = Policy(self.path)
+        return self._policy.act(np.asarray(obs, dtype=np.float32))
 
 
 class _Evaluator:

@@ -20,7 +20,7 @@ from gymnasium.utils.env_checker import data_equivalence
 from gymnasium.vector import AutoresetMode
 
 import modesuite
-from modesuite.ray import ExpertPolicy, RayVectorEnv, evaluate
+from modesuite.ray import ExpertPolicy, RayVectorEnv, TrainedPolicy, evaluate
 
 TASK = "MoDe-Franka-Place-v0"
 N = 5  # uneven shards over two workers: 3 + 2
@@ -158,9 +158,12 @@ def test_bad_targets_and_options_are_clear_errors() -> None:
         RayVectorEnv(TASK, 2, 1, step_timeout=0)
 
 
-def run_json(binary: Path, target: str, episodes: int) -> dict[str, Any]:
+def run_json(
+    binary: Path, target: str, episodes: int, policy: str = "scripted", seed: int = 0
+) -> dict[str, Any]:
     out = subprocess.run(
-        [str(binary), "run", target, "--policy", "scripted", "--episodes", str(episodes), "--json"],
+        [str(binary), "run", target, "--policy", policy, "--episodes", str(episodes)]
+        + ["--seed", str(seed), "--json"],
         capture_output=True,
         text=True,
         check=True,
@@ -177,6 +180,20 @@ def test_evaluate_reproduces_run_json_for_the_scripted_expert(modesuite_bin: Pat
         for key in want:
             if key != "env_steps_per_s":
                 assert got[t][key] == want[key], (t, key)
+
+
+def test_evaluate_a_shipped_trained_policy_as_run_does(root: Path, modesuite_bin: Path) -> None:
+    folder = root / "policies/ppo/MoDe-Franka-Place-v0"
+    policy = TrainedPolicy(folder)
+    got = evaluate(policy, policy.target, episodes=6, num_workers=2, seed=1_000_000,
+                   actions=policy.actions)[policy.target]
+    want = run_json(modesuite_bin, policy.target, 6, policy=str(folder), seed=1_000_000)
+    print(f"trained PPO: evaluate {got}\n             run      {want}")
+    for key in want:
+        if key != "env_steps_per_s":
+            assert got[key] == want[key], key
+    with pytest.raises(modesuite.SceneError, match="not a policy folder"):
+        TrainedPolicy(root / "scenes")
 
 
 def test_evaluate_reports_a_failing_policy_as_errors() -> None:
