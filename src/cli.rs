@@ -33,6 +33,7 @@ use modesuite_engine::prelude::*;
 use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
 
+pub mod dataset;
 mod fuzz;
 pub mod learn;
 mod record;
@@ -87,6 +88,15 @@ pub enum Command {
     Eval(learn::EvalArgs),
     /// Plot training curves (mean and standard deviation over run folders) into a PNG.
     Plot(learn::PlotArgs),
+    /// Record episodes of the scripted expert or a trained policy into a LeRobot v3.0 dataset
+    /// (resumable: the same command continues a killed recording).
+    Record(dataset::RecordArgs),
+    /// Inspect or re-simulate a recorded dataset.
+    Dataset {
+        /// `info` or `replay`.
+        #[command(subcommand)]
+        command: dataset::DatasetCommand,
+    },
     /// Fuzz the input parsers and loaders (scene, task, robot, URDF, actions, meshes, state
     /// files) with mutated inputs; exit 1 if any input panicked, 3 if one hung.
     Fuzz(fuzz::FuzzArgs),
@@ -264,6 +274,8 @@ pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
         Some(Command::Train(args)) => learn::train(&args, out),
         Some(Command::Eval(args)) => learn::eval(&args, out),
         Some(Command::Plot(args)) => learn::plot(&args, out),
+        Some(Command::Record(args)) => dataset::record(&args, out),
+        Some(Command::Dataset { command }) => dataset::dataset(&command, out),
         Some(Command::Fuzz(args)) => fuzz::fuzz(&args, out),
         Some(Command::Soak(args)) => soak::soak(&args, out),
         Some(Command::Bench {
