@@ -37,15 +37,28 @@ fn info(dir: &Path) -> serde_json::Value {
 fn record(dir: &Path, episodes: u32, noise: &str) -> Vec<String> {
     let e = episodes.to_string();
     let out = ok(cli(&[
-        "record", TASK, "--episodes", &e, "--seed", "3", "--steps", "50", "--noise", noise,
-        "--out", dir.to_str().unwrap(), "--json",
+        "record",
+        TASK,
+        "--episodes",
+        &e,
+        "--seed",
+        "3",
+        "--steps",
+        "50",
+        "--noise",
+        noise,
+        "--out",
+        dir.to_str().unwrap(),
+        "--json",
     ]));
     out.lines().map(str::to_string).collect()
 }
 
 fn replay_all(dir: &Path) -> Vec<serde_json::Value> {
     let out = ok(cli(&["dataset", "replay", dir.to_str().unwrap(), "--json"]));
-    out.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+    out.lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
 }
 
 #[test]
@@ -60,7 +73,10 @@ fn recorded_episodes_replay_bit_for_bit_and_noise_varies_them() {
     }
     assert_eq!(replays.len(), 3);
     let i = info(&dir);
-    assert_eq!((i["episodes"].as_u64(), i["codebase_version"].as_str()), (Some(3), Some("v3.0")));
+    assert_eq!(
+        (i["episodes"].as_u64(), i["codebase_version"].as_str()),
+        (Some(3), Some("v3.0"))
+    );
     assert_eq!(i["recorded_by"]["target"], TASK);
     // the same seeds without noise give other actions, hence other data files
     let quiet = scratch("quiet");
@@ -72,7 +88,15 @@ fn recorded_episodes_replay_bit_for_bit_and_noise_varies_them() {
     record(&dir, 4, "0.2");
     assert_eq!(info(&dir)["episodes"], 4);
     let o = cli(&[
-        "record", TASK, "--episodes", "5", "--steps", "50", "--cameras", "robot", "--out",
+        "record",
+        TASK,
+        "--episodes",
+        "5",
+        "--steps",
+        "50",
+        "--cameras",
+        "robot",
+        "--out",
         dir.to_str().unwrap(),
     ]);
     let err = String::from_utf8_lossy(&o.stderr);
@@ -98,8 +122,18 @@ fn committed(dir: &Path) -> u64 {
 fn a_recording_killed_at_any_moment_keeps_its_committed_episodes() {
     let dir = scratch("kill");
     let args = [
-        "record", TASK, "--episodes", "12", "--seed", "11", "--steps", "30", "--noise", "0.1",
-        "--out", dir.to_str().unwrap(),
+        "record",
+        TASK,
+        "--episodes",
+        "12",
+        "--seed",
+        "11",
+        "--steps",
+        "30",
+        "--noise",
+        "0.1",
+        "--out",
+        dir.to_str().unwrap(),
     ];
     let mut orphans_seen = 0;
     for (round, delay_ms) in [0u64, 3, 7, 13, 21, 40].into_iter().enumerate() {
@@ -120,7 +154,11 @@ fn a_recording_killed_at_any_moment_keeps_its_committed_episodes() {
         let i = info(&dir);
         let n = committed(&dir);
         orphans_seen += i["orphans"].as_array().unwrap().len();
-        println!("round {round}: killed {delay_ms} ms after commit {}: {n} episodes, orphans {}", before + 1, i["orphans"]);
+        println!(
+            "round {round}: killed {delay_ms} ms after commit {}: {n} episodes, orphans {}",
+            before + 1,
+            i["orphans"]
+        );
         assert_eq!(i["episodes"].as_u64(), Some(n));
         assert!(n > before);
         for r in replay_all(&dir) {
@@ -130,10 +168,16 @@ fn a_recording_killed_at_any_moment_keeps_its_committed_episodes() {
     // the same command finishes the dataset, deleting what the kills left
     ok(cli(&args));
     let i = info(&dir);
-    println!("finished: {} episodes, orphans {} (seen after kills: {orphans_seen})", i["episodes"], i["orphans"]);
+    println!(
+        "finished: {} episodes, orphans {} (seen after kills: {orphans_seen})",
+        i["episodes"], i["orphans"]
+    );
     assert_eq!(i["episodes"], 12);
     assert_eq!(i["orphans"].as_array().unwrap().len(), 0);
-    let seeds: Vec<u64> = replay_all(&dir).iter().map(|r| r["seed"].as_u64().unwrap()).collect();
+    let seeds: Vec<u64> = replay_all(&dir)
+        .iter()
+        .map(|r| r["seed"].as_u64().unwrap())
+        .collect();
     assert_eq!(seeds, (11..23).collect::<Vec<_>>());
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -141,20 +185,31 @@ fn a_recording_killed_at_any_moment_keeps_its_committed_episodes() {
 #[test]
 fn a_full_disk_ends_the_recording_with_a_clear_error_and_a_loadable_dataset() {
     let dir = scratch("full");
-    // 48 KiB per file: the first episodes fit, the growing episodes file soon does not
+    // 96 KiB per file: the first episodes fit, the episodes file (about 55 KiB + 3 KiB per
+    // episode) soon does not
     let o = Command::new("bash")
         .arg("-c")
-        .arg("ulimit -f 48; trap '' XFSZ; exec \"$0\" \"$@\"")
+        .arg("ulimit -f 96; trap '' XFSZ; exec \"$0\" \"$@\"")
         .arg(bin())
         .args([
-            "record", TASK, "--episodes", "40", "--steps", "40", "--out", dir.to_str().unwrap(),
+            "record",
+            TASK,
+            "--episodes",
+            "40",
+            "--steps",
+            "40",
+            "--out",
+            dir.to_str().unwrap(),
         ])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     println!("full disk: exit {:?}: {}", o.status.code(), err.trim());
     assert_eq!(o.status.code(), Some(1), "{err}");
-    assert!(err.contains("error:") && err.contains(dir.to_str().unwrap()), "{err}");
+    assert!(
+        err.contains("error:") && err.contains(dir.to_str().unwrap()),
+        "{err}"
+    );
     assert!(!err.contains("panicked"), "{err}");
     let i = info(&dir);
     let n = i["episodes"].as_u64().unwrap();

@@ -3,7 +3,9 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use arrow_array::{Array, BooleanArray, Float64Array, Int64Array, ListArray, StringArray, UInt64Array};
+use arrow_array::{
+    Array, BooleanArray, Float64Array, Int64Array, ListArray, StringArray, UInt64Array,
+};
 
 use crate::format::{episodes_file, Info};
 use crate::stats::{FeatureStats, STAT_NAMES};
@@ -60,7 +62,10 @@ pub fn write_episodes(dir: &Path, info: &Info, eps: &[EpisodeMeta]) -> Result<()
     };
     let mut cols = vec![
         ints("episode_index", &|e| e.index),
-        table::list_str("tasks", &eps.iter().map(|e| e.tasks.clone()).collect::<Vec<_>>()),
+        table::list_str(
+            "tasks",
+            &eps.iter().map(|e| e.tasks.clone()).collect::<Vec<_>>(),
+        ),
         ints("length", &|e| e.length),
         ints("data/chunk_index", &|e| e.data_chunk),
         ints("data/file_index", &|e| e.data_file),
@@ -69,7 +74,9 @@ pub fn write_episodes(dir: &Path, info: &Info, eps: &[EpisodeMeta]) -> Result<()
     ];
     for (k, key) in info.features.videos().into_iter().enumerate() {
         let span = |e: &EpisodeMeta| e.videos[k].clone();
-        cols.push(ints(&format!("videos/{key}/chunk_index"), &|e| span(e).chunk));
+        cols.push(ints(&format!("videos/{key}/chunk_index"), &|e| {
+            span(e).chunk
+        }));
         cols.push(ints(&format!("videos/{key}/file_index"), &|e| span(e).file));
         let from: Vec<f64> = eps.iter().map(|e| span(e).from_timestamp).collect();
         let to: Vec<f64> = eps.iter().map(|e| span(e).to_timestamp).collect();
@@ -81,8 +88,10 @@ pub fn write_episodes(dir: &Path, info: &Info, eps: &[EpisodeMeta]) -> Result<()
             for stat in STAT_NAMES {
                 let col = format!("stats/{name}/{stat}");
                 if stat == "count" {
-                    let rows: Vec<Vec<i64>> =
-                        eps.iter().map(|e| vec![e.stats[f].1.count as i64]).collect();
+                    let rows: Vec<Vec<i64>> = eps
+                        .iter()
+                        .map(|e| vec![e.stats[f].1.count as i64])
+                        .collect();
                     cols.push(table::list_i64(&col, &rows));
                 } else {
                     let rows: Vec<Vec<f64>> =
@@ -125,12 +134,27 @@ pub fn read_episodes(dir: &Path, info: &Info) -> Result<Vec<EpisodeMeta>, Datase
             typed::<Int64Array>(column(&batch, name, &path)?, name, "int64", &path)
         };
         let index = int("episode_index")?;
-        let tasks = typed::<ListArray>(column(&batch, "tasks", &path)?, "tasks", "list<string>", &path)?;
+        let tasks = typed::<ListArray>(
+            column(&batch, "tasks", &path)?,
+            "tasks",
+            "list<string>",
+            &path,
+        )?;
         let length = int("length")?;
         let (dc, df) = (int("data/chunk_index")?, int("data/file_index")?);
         let (from, to) = (int("dataset_from_index")?, int("dataset_to_index")?);
-        let seed = typed::<UInt64Array>(column(&batch, "modesuite/seed", &path)?, "modesuite/seed", "uint64", &path)?;
-        let success = typed::<BooleanArray>(column(&batch, "modesuite/success", &path)?, "modesuite/success", "bool", &path)?;
+        let seed = typed::<UInt64Array>(
+            column(&batch, "modesuite/seed", &path)?,
+            "modesuite/seed",
+            "uint64",
+            &path,
+        )?;
+        let success = typed::<BooleanArray>(
+            column(&batch, "modesuite/success", &path)?,
+            "modesuite/success",
+            "bool",
+            &path,
+        )?;
         for r in 0..batch.num_rows() {
             if out.len() == info.total_episodes {
                 break;
@@ -140,7 +164,10 @@ pub fn read_episodes(dir: &Path, info: &Info) -> Result<Vec<EpisodeMeta>, Datase
                 let f = |s: &str| format!("videos/{key}/{s}");
                 let ts = |s: &str| -> Result<f64, DatasetError> {
                     let n = f(s);
-                    Ok(typed::<Float64Array>(column(&batch, &n, &path)?, &n, "double", &path)?.value(r))
+                    Ok(
+                        typed::<Float64Array>(column(&batch, &n, &path)?, &n, "double", &path)?
+                            .value(r),
+                    )
                 };
                 spans.push(VideoSpan {
                     key: key.to_string(),
@@ -160,12 +187,12 @@ pub fn read_episodes(dir: &Path, info: &Info) -> Result<Vec<EpisodeMeta>, Datase
                     stats.push((name.to_string(), s));
                 }
             }
-            let bad = |what: &str| {
-                DatasetError::new(format!("{}: row {r}: {what}", path.display()))
-            };
+            let bad =
+                |what: &str| DatasetError::new(format!("{}: row {r}: {what}", path.display()));
             let e = EpisodeMeta {
                 index: index.value(r) as usize,
-                tasks: table::list_row_str(tasks, r).ok_or_else(|| bad("tasks is not a list of strings"))?,
+                tasks: table::list_row_str(tasks, r)
+                    .ok_or_else(|| bad("tasks is not a list of strings"))?,
                 length: length.value(r) as usize,
                 data_chunk: dc.value(r) as usize,
                 data_file: df.value(r) as usize,
@@ -177,7 +204,11 @@ pub fn read_episodes(dir: &Path, info: &Info) -> Result<Vec<EpisodeMeta>, Datase
                 success: success.is_valid(r).then(|| success.value(r)),
             };
             if e.index != out.len() {
-                return Err(bad(&format!("episode_index = {}, expected {}", e.index, out.len())));
+                return Err(bad(&format!(
+                    "episode_index = {}, expected {}",
+                    e.index,
+                    out.len()
+                )));
             }
             out.push(e);
         }
@@ -213,7 +244,10 @@ pub fn write_tasks(dir: &Path, tasks: &[String]) -> Result<(), DatasetError> {
     let meta = HashMap::from([("pandas".to_string(), pandas.to_string())]);
     table::write(
         &dir.join("meta/tasks.parquet"),
-        vec![crate::table::Column::I64(idx).to_arrow("task_index"), table::strings("task", tasks)],
+        vec![
+            crate::table::Column::I64(idx).to_arrow("task_index"),
+            table::strings("task", tasks),
+        ],
         meta,
     )
 }
@@ -226,7 +260,12 @@ pub fn read_tasks(dir: &Path) -> Result<Vec<String>, DatasetError> {
     }
     let mut out: Vec<(i64, String)> = Vec::new();
     for batch in table::read(&path)? {
-        let idx = typed::<Int64Array>(column(&batch, "task_index", &path)?, "task_index", "int64", &path)?;
+        let idx = typed::<Int64Array>(
+            column(&batch, "task_index", &path)?,
+            "task_index",
+            "int64",
+            &path,
+        )?;
         let task = typed::<StringArray>(column(&batch, "task", &path)?, "task", "string", &path)?;
         for r in 0..batch.num_rows() {
             out.push((idx.value(r), task.value(r).to_string()));

@@ -16,8 +16,7 @@ pub const CHUNKS_SIZE: usize = 1000;
 /// `data_path` of `info.json`.
 pub const DATA_PATH: &str = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet";
 /// `video_path` of `info.json`.
-pub const VIDEO_PATH: &str =
-    "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4";
+pub const VIDEO_PATH: &str = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4";
 /// The features every frame has, after the user's (names, dtypes), all of shape `[1]`.
 pub const DEFAULT_FEATURES: [(&str, &str); 5] = [
     ("timestamp", "float32"),

@@ -50,7 +50,12 @@ impl Dataset {
         let extra_path = dir.join("meta/modesuite.json");
         let extra = match std::fs::read_to_string(&extra_path) {
             Ok(t) => serde_json::from_str(&t).map_err(|e| {
-                DatasetError::new(format!("{}:{}:{}: {e}", extra_path.display(), e.line(), e.column()))
+                DatasetError::new(format!(
+                    "{}:{}:{}: {e}",
+                    extra_path.display(),
+                    e.line(),
+                    e.column()
+                ))
             })?,
             Err(_) => serde_json::Value::Null,
         };
@@ -77,7 +82,10 @@ impl Dataset {
         let orphans = all
             .into_iter()
             .filter(|p| {
-                let name = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                let name = p
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
                 let partial = name.starts_with('.') && name.contains(".partial");
                 let in_data = p.starts_with(dir.join("data")) || p.starts_with(dir.join("videos"));
                 partial || (in_data && !expected.contains(p))
@@ -107,9 +115,14 @@ impl Dataset {
         for batch in table::read(&path)? {
             let ep_col = table::column(&batch, "episode_index", &path)?;
             let Some(Column::I64(ep_idx)) = Column::from_arrow(ep_col.as_ref()) else {
-                return Err(DatasetError::new(format!("{}: episode_index is not int64", path.display())));
+                return Err(DatasetError::new(format!(
+                    "{}: episode_index is not int64",
+                    path.display()
+                )));
             };
-            let rows: Vec<usize> = (0..ep_idx.len()).filter(|&r| ep_idx[r] == i as i64).collect();
+            let rows: Vec<usize> = (0..ep_idx.len())
+                .filter(|&r| ep_idx[r] == i as i64)
+                .collect();
             for (name, f) in &self.info.features.0 {
                 if f.is_video() {
                     continue;

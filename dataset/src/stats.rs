@@ -70,7 +70,11 @@ impl FeatureStats {
             s.mean.push(mean);
             s.std.push(var.sqrt());
             for (k, (q, _)) in QUANTILES.iter().enumerate() {
-                s.quantiles[k].push(if col.is_empty() { 0.0 } else { quantile(&col, *q) });
+                s.quantiles[k].push(if col.is_empty() {
+                    0.0
+                } else {
+                    quantile(&col, *q)
+                });
             }
         }
         s
@@ -207,8 +211,8 @@ mod tests {
         let a = [1.0, 2.0, 3.0, 10.0];
         let b = [-4.0, 0.5];
         let whole: Vec<f64> = a.iter().chain(&b).copied().collect();
-        let agg = FeatureStats::aggregate(&[&FeatureStats::of(&a, 1), &FeatureStats::of(&b, 1)])
-            .unwrap();
+        let agg =
+            FeatureStats::aggregate(&[&FeatureStats::of(&a, 1), &FeatureStats::of(&b, 1)]).unwrap();
         let w = FeatureStats::of(&whole, 1);
         assert_eq!((agg.min, agg.max, agg.count), (w.min, w.max, w.count));
         assert!((agg.mean[0] - w.mean[0]).abs() < 1e-12);

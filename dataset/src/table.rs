@@ -230,9 +230,9 @@ pub fn column<'a>(
     name: &str,
     path: &Path,
 ) -> Result<&'a ArrayRef, DatasetError> {
-    batch.column_by_name(name).ok_or_else(|| {
-        DatasetError::new(format!("{}: no column {name:?}", path.display()))
-    })
+    batch
+        .column_by_name(name)
+        .ok_or_else(|| DatasetError::new(format!("{}: no column {name:?}", path.display())))
 }
 
 /// A column's values as `T`'s array, or a located error naming the expected type.

@@ -145,7 +145,9 @@ impl DatasetWriter {
             "timestamp".into(),
             Column::F32 {
                 dim: 1,
-                values: (0..len).map(|i| (i as f64 / f64::from(fps)) as f32).collect(),
+                values: (0..len)
+                    .map(|i| (i as f64 / f64::from(fps)) as f32)
+                    .collect(),
             },
         ));
         cols.push(("frame_index".into(), Column::I64((0..len as i64).collect())));
@@ -154,7 +156,10 @@ impl DatasetWriter {
             "index".into(),
             Column::I64((from as i64..(from + len) as i64).collect()),
         ));
-        cols.push(("task_index".into(), Column::I64(vec![task_index as i64; len])));
+        cols.push((
+            "task_index".into(),
+            Column::I64(vec![task_index as i64; len]),
+        ));
         // statistics of every feature, the videos' from their frames
         let mut stats = Vec::new();
         let mut video_stats = ep.videos.iter().map(|(_, s)| s.clone());
@@ -244,7 +249,9 @@ impl DatasetWriter {
             .features
             .0
             .iter()
-            .filter(|(n, f)| !f.is_video() && !crate::format::DEFAULT_FEATURES.iter().any(|(d, _)| d == n))
+            .filter(|(n, f)| {
+                !f.is_video() && !crate::format::DEFAULT_FEATURES.iter().any(|(d, _)| d == n)
+            })
             .collect();
         let names: Vec<&str> = ep.columns.iter().map(|(n, _)| n.as_str()).collect();
         let want: Vec<&str> = user.iter().map(|(n, _)| n.as_str()).collect();

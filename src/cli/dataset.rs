@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 
 use serde_json::json;
 
-use modesuite_dataset::{Column, Dataset, DatasetWriter, EpisodeInput, Feature, FeatureStats, Features, Info};
+use modesuite_dataset::{
+    Column, Dataset, DatasetWriter, EpisodeInput, Feature, FeatureStats, Features, Info,
+};
 use modesuite_engine::prelude::*;
 use modesuite_engine::rng::EnvRng;
 use modesuite_render::video::VideoWriter;
@@ -138,7 +140,11 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
     let mut act_names = Vec::new();
     for (name, _, len) in &act.parts {
         for k in 0..*len {
-            act_names.push(if *len == 1 { name.clone() } else { format!("{name}.{k}") });
+            act_names.push(if *len == 1 {
+                name.clone()
+            } else {
+                format!("{name}.{k}")
+            });
         }
     }
     let obs_dim = spaces.observation.flat_dim();
@@ -152,12 +158,12 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
         ("next.done".to_string(), Feature::scalar("bool")),
         ("next.success".to_string(), Feature::scalar("bool")),
     ];
-    let (renderer, mut cameras) = (
-        (!args.cameras.is_empty())
-            .then(|| EnvRenderer::for_scene(model.clone()).map_err(render_err))
-            .transpose()?,
-        Vec::new(),
-    );
+    let renderer = if args.cameras.is_empty() {
+        None
+    } else {
+        Some(EnvRenderer::for_scene(model.clone()).map_err(render_err)?)
+    };
+    let mut cameras = Vec::new();
     if let Some(r) = &renderer {
         for name in &args.cameras {
             let cam = r.scene_camera(name).map_err(render_err)?.clone();
@@ -207,7 +213,11 @@ fn add_noise(action: &mut [f32], act: &ActLayout, noise: f64, rng: &mut EnvRng) 
     }
     for (i, a) in action.iter_mut().enumerate() {
         let (lo, hi) = (act.low[i], act.high[i]);
-        let half = if lo.is_finite() && hi.is_finite() { 0.5 * f64::from(hi - lo) } else { 1.0 };
+        let half = if lo.is_finite() && hi.is_finite() {
+            0.5 * f64::from(hi - lo)
+        } else {
+            1.0
+        };
         let v = f64::from(*a) + noise * half * rng.normal();
         *a = (v as f32).clamp(lo, hi);
     }
@@ -216,9 +226,19 @@ fn add_noise(action: &mut [f32], act: &ActLayout, noise: f64, rng: &mut EnvRng) 
 /// `modesuite record`.
 pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
     if !(0.0..=1.0).contains(&args.noise) {
-        return Err(CliError::input(format!("--noise = {}: in 0..=1", args.noise)));
+        return Err(CliError::input(format!(
+            "--noise = {}: in 0..=1",
+            args.noise
+        )));
     }
-    let Setup { mut env, mut renderer, cameras, info, extra, steps } = setup(args)?;
+    let Setup {
+        mut env,
+        mut renderer,
+        cameras,
+        info,
+        extra,
+        steps,
+    } = setup(args)?;
     env.autoreset = false;
     let mut writer = DatasetWriter::open_or_create(&args.out, info, &extra).map_err(dataset_err)?;
     let act = ActLayout::of(&env.spaces().action).map_err(CliError::input)?;
@@ -228,7 +248,12 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let fps = writer.info().fps;
     let start = writer.info().total_episodes as u64;
     if start >= args.episodes && !args.json {
-        writeln!(out, "{}: {start} episodes already, nothing to record", args.out.display()).map_err(io)?;
+        writeln!(
+            out,
+            "{}: {start} episodes already, nothing to record",
+            args.out.display()
+        )
+        .map_err(io)?;
     }
     for e in start..args.episodes {
         let seed = args.seed.wrapping_add(e);
@@ -243,13 +268,16 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         let mut videos: Vec<(PathBuf, VideoWriter, Vec<Vec<u8>>)> = Vec::new();
         for (k, cam) in cameras.iter().enumerate() {
             let path = staging.join(format!("episode-{e}-{k}.mp4"));
-            let w = VideoWriter::create(&path, cam.width, cam.height, f64::from(fps)).map_err(render_err)?;
+            let w = VideoWriter::create(&path, cam.width, cam.height, f64::from(fps))
+                .map_err(render_err)?;
             videos.push((path, w, Vec::new()));
         }
         let (mut success, mut error, mut ret) = (None, None, 0.0);
         for t in 0..steps {
             if let Some(r) = renderer.as_mut() {
-                let frames = r.render_cameras(&env.app.world, &cameras).map_err(render_err)?;
+                let frames = r
+                    .render_cameras(&env.app.world, &cameras)
+                    .map_err(render_err)?;
                 for (frame, (_, w, sampled)) in frames.iter().zip(videos.iter_mut()) {
                     w.push(frame).map_err(render_err)?;
                     if t % 4 == 0 {
@@ -297,9 +325,27 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         let input = EpisodeInput {
             task: task.clone(),
             columns: vec![
-                ("observation.state".into(), Column::F32 { dim: states.len() / len, values: states }),
-                ("action".into(), Column::F32 { dim: act.dim, values: actions }),
-                ("next.reward".into(), Column::F32 { dim: 1, values: rewards }),
+                (
+                    "observation.state".into(),
+                    Column::F32 {
+                        dim: states.len() / len,
+                        values: states,
+                    },
+                ),
+                (
+                    "action".into(),
+                    Column::F32 {
+                        dim: act.dim,
+                        values: actions,
+                    },
+                ),
+                (
+                    "next.reward".into(),
+                    Column::F32 {
+                        dim: 1,
+                        values: rewards,
+                    },
+                ),
                 ("next.done".into(), Column::Bool(dones)),
                 ("next.success".into(), Column::Bool(succ)),
             ],
@@ -388,10 +434,18 @@ fn info(dir: &Path, as_json: bool, out: &mut dyn Write) -> Result<(), CliError> 
     Ok(())
 }
 
-fn replay(dir: &Path, only: Option<usize>, as_json: bool, out: &mut dyn Write) -> Result<(), CliError> {
+fn replay(
+    dir: &Path,
+    only: Option<usize>,
+    as_json: bool,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
     let ds = open(dir)?;
     let target = ds.extra["target"].as_str().ok_or_else(|| {
-        CliError::input(format!("{}: meta/modesuite.json names no target: not recorded by modesuite", dir.display()))
+        CliError::input(format!(
+            "{}: meta/modesuite.json names no target: not recorded by modesuite",
+            dir.display()
+        ))
     })?;
     let opts = MakeOptions {
         actions: ds.extra["actions"].as_str().map(str::to_string),
@@ -408,20 +462,47 @@ fn replay(dir: &Path, only: Option<usize>, as_json: bool, out: &mut dyn Write) -
         let cols = ds.read_episode(i).map_err(dataset_err)?;
         let meta = &ds.episodes[i];
         let get = |name: &str| cols.iter().find(|(n, _)| n == name).map(|(_, c)| c);
-        let (Some(Column::F32 { dim: sd, values: states }), Some(Column::F32 { dim: ad, values: actions }), Some(Column::F32 { values: rewards, .. }), Some(Column::Bool(dones))) =
-            (get("observation.state"), get("action"), get("next.reward"), get("next.done"))
+        let (
+            Some(Column::F32 {
+                dim: sd,
+                values: states,
+            }),
+            Some(Column::F32 {
+                dim: ad,
+                values: actions,
+            }),
+            Some(Column::F32 {
+                values: rewards, ..
+            }),
+            Some(Column::Bool(dones)),
+        ) = (
+            get("observation.state"),
+            get("action"),
+            get("next.reward"),
+            get("next.done"),
+        )
         else {
-            return Err(CliError::input(format!("{}: episode {i} lacks observation.state, action, next.reward or next.done", dir.display())));
+            return Err(CliError::input(format!(
+                "{}: episode {i} lacks observation.state, action, next.reward or next.done",
+                dir.display()
+            )));
         };
         let mut obs = env.reset(Some(meta.seed)).0;
         let mut mismatch = None;
         for t in 0..meta.length {
-            if obs.len() != *sd || obs.iter().zip(&states[t * sd..(t + 1) * sd]).any(|(a, b)| a.to_bits() != b.to_bits()) {
+            if obs.len() != *sd
+                || obs
+                    .iter()
+                    .zip(&states[t * sd..(t + 1) * sd])
+                    .any(|(a, b)| a.to_bits() != b.to_bits())
+            {
                 mismatch = Some(format!("frame {t}: observation.state differs"));
                 break;
             }
             let o = env.step(&actions[t * ad..(t + 1) * ad]);
-            if (o.reward as f32).to_bits() != rewards[t].to_bits() || (o.terminated || o.truncated) != dones[t] {
+            if (o.reward as f32).to_bits() != rewards[t].to_bits()
+                || (o.terminated || o.truncated) != dones[t]
+            {
                 mismatch = Some(format!("frame {t}: reward or end differs"));
                 break;
             }
@@ -433,11 +514,22 @@ fn replay(dir: &Path, only: Option<usize>, as_json: bool, out: &mut dyn Write) -
         if as_json {
             writeln!(out, "{}", json!({"episode": i, "seed": meta.seed, "frames": meta.length, "identical": mismatch.is_none(), "mismatch": mismatch})).map_err(io)?;
         } else {
-            writeln!(out, "episode {i}: seed {}, {} frames: {}", meta.seed, meta.length, mismatch.as_deref().unwrap_or("every state, reward and end identical")).map_err(io)?;
+            writeln!(
+                out,
+                "episode {i}: seed {}, {} frames: {}",
+                meta.seed,
+                meta.length,
+                mismatch
+                    .as_deref()
+                    .unwrap_or("every state, reward and end identical")
+            )
+            .map_err(io)?;
         }
     }
     if failed > 0 {
-        return Err(CliError::runtime(format!("{failed} episode(s) did not replay bit for bit")));
+        return Err(CliError::runtime(format!(
+            "{failed} episode(s) did not replay bit for bit"
+        )));
     }
     Ok(())
 }
