@@ -9,7 +9,7 @@ use arrow_array::{
 
 use crate::format::{episodes_file, Info};
 use crate::stats::{FeatureStats, STAT_NAMES};
-use crate::table::{self, column, typed};
+use crate::table;
 use crate::DatasetError;
 
 /// Where one video feature's frames of an episode are.
@@ -131,30 +131,15 @@ pub fn read_episodes(dir: &Path, info: &Info) -> Result<Vec<EpisodeMeta>, Datase
         .collect();
     for batch in table::read(&path)? {
         let int = |name: &str| -> Result<&Int64Array, DatasetError> {
-            typed::<Int64Array>(column(&batch, name, &path)?, name, "int64", &path)
+            table::get::<Int64Array>(&batch, name, "int64", &path)
         };
         let index = int("episode_index")?;
-        let tasks = typed::<ListArray>(
-            column(&batch, "tasks", &path)?,
-            "tasks",
-            "list<string>",
-            &path,
-        )?;
+        let tasks = table::get::<ListArray>(&batch, "tasks", "list<string>", &path)?;
         let length = int("length")?;
         let (dc, df) = (int("data/chunk_index")?, int("data/file_index")?);
         let (from, to) = (int("dataset_from_index")?, int("dataset_to_index")?);
-        let seed = typed::<UInt64Array>(
-            column(&batch, "modesuite/seed", &path)?,
-            "modesuite/seed",
-            "uint64",
-            &path,
-        )?;
-        let success = typed::<BooleanArray>(
-            column(&batch, "modesuite/success", &path)?,
-            "modesuite/success",
-            "bool",
-            &path,
-        )?;
+        let seed = table::get::<UInt64Array>(&batch, "modesuite/seed", "uint64", &path)?;
+        let success = table::get::<BooleanArray>(&batch, "modesuite/success", "bool", &path)?;
         for r in 0..batch.num_rows() {
             if out.len() == info.total_episodes {
                 break;
@@ -164,10 +149,7 @@ pub fn read_episodes(dir: &Path, info: &Info) -> Result<Vec<EpisodeMeta>, Datase
                 let f = |s: &str| format!("videos/{key}/{s}");
                 let ts = |s: &str| -> Result<f64, DatasetError> {
                     let n = f(s);
-                    Ok(
-                        typed::<Float64Array>(column(&batch, &n, &path)?, &n, "double", &path)?
-                            .value(r),
-                    )
+                    Ok(table::get::<Float64Array>(&batch, &n, "double", &path)?.value(r))
                 };
                 spans.push(VideoSpan {
                     key: key.to_string(),
@@ -260,13 +242,8 @@ pub fn read_tasks(dir: &Path) -> Result<Vec<String>, DatasetError> {
     }
     let mut out: Vec<(i64, String)> = Vec::new();
     for batch in table::read(&path)? {
-        let idx = typed::<Int64Array>(
-            column(&batch, "task_index", &path)?,
-            "task_index",
-            "int64",
-            &path,
-        )?;
-        let task = typed::<StringArray>(column(&batch, "task", &path)?, "task", "string", &path)?;
+        let idx = table::get::<Int64Array>(&batch, "task_index", "int64", &path)?;
+        let task = table::get::<StringArray>(&batch, "task", "string", &path)?;
         for r in 0..batch.num_rows() {
             out.push((idx.value(r), task.value(r).to_string()));
         }

@@ -5,7 +5,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use arrow_array::builder::{ListBuilder, PrimitiveBuilder, StringBuilder};
-use arrow_array::types::{Float64Type, Int64Type};
+use arrow_array::types::{ArrowPrimitiveType, Float64Type, Int64Type};
 use arrow_array::{
     Array, ArrayRef, BooleanArray, FixedSizeListArray, Float32Array, Float64Array, Int64Array,
     ListArray, RecordBatch, StringArray, UInt64Array,
@@ -122,9 +122,9 @@ impl Column {
     }
 }
 
-/// A `list<double>` column of one list per row.
-pub fn list_f64(name: &str, rows: &[Vec<f64>]) -> (Field, ArrayRef) {
-    let mut b = ListBuilder::new(PrimitiveBuilder::<Float64Type>::new());
+/// A list column of one list of primitive values per row.
+fn list_of<T: ArrowPrimitiveType>(name: &str, rows: &[Vec<T::Native>]) -> (Field, ArrayRef) {
+    let mut b = ListBuilder::new(PrimitiveBuilder::<T>::new());
     for r in rows {
         b.values().append_slice(r);
         b.append(true);
@@ -133,15 +133,14 @@ pub fn list_f64(name: &str, rows: &[Vec<f64>]) -> (Field, ArrayRef) {
     (Field::new(name, a.data_type().clone(), true), Arc::new(a))
 }
 
+/// A `list<double>` column of one list per row.
+pub fn list_f64(name: &str, rows: &[Vec<f64>]) -> (Field, ArrayRef) {
+    list_of::<Float64Type>(name, rows)
+}
+
 /// A `list<int64>` column of one list per row.
 pub fn list_i64(name: &str, rows: &[Vec<i64>]) -> (Field, ArrayRef) {
-    let mut b = ListBuilder::new(PrimitiveBuilder::<Int64Type>::new());
-    for r in rows {
-        b.values().append_slice(r);
-        b.append(true);
-    }
-    let a = b.finish();
-    (Field::new(name, a.data_type().clone(), true), Arc::new(a))
+    list_of::<Int64Type>(name, rows)
 }
 
 /// A `list<string>` column of one list per row.
@@ -249,6 +248,17 @@ pub fn typed<'a, T: 'static>(
             array.data_type()
         ))
     })
+}
+
+/// The named column of `batch` as `T`'s array, or a located error (missing, or of another
+/// type than `what`).
+pub fn get<'a, T: 'static>(
+    batch: &'a RecordBatch,
+    name: &str,
+    what: &str,
+    path: &Path,
+) -> Result<&'a T, DatasetError> {
+    typed::<T>(column(batch, name, path)?, name, what, path)
 }
 
 /// Row `i` of a `list<double>` (or `list<int64>`) column as f64 values.
