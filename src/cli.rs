@@ -16,6 +16,10 @@
 //! - `modesuite bench NAME [--json]`: with `--json`, one JSON object per line per case with at
 //!   least `case`, `steps_per_s`, `threads`, `envs` (for `bench render`, images per second).
 //! - `modesuite view SCENE_OR_TASK [--seed S] [--record FILE.json]`: the interactive viewer.
+//! - `modesuite record TARGET --out DIR [--policy P] [--episodes N] [--seed S] [--noise X]
+//!   [--cameras C,...]`: a LeRobot v3.0 dataset (docs/datasets.md; episode i from seed S + i;
+//!   `--episodes` counts the dataset's total, so the same command resumes); `dataset info DIR`
+//!   and `dataset replay DIR [--episode I] [--json]` (exit 1 unless every state is reproduced).
 //! - `--plugin PATH` (repeatable) on `run`, `validate` and `list` loads a compiled plugin (C ABI,
 //!   see `modesuite_engine::dynamic`); nothing is ever loaded because a scene names it.
 
