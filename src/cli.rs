@@ -39,6 +39,7 @@ use modesuite_engine::{DynamicPlugin, PluginLoadError};
 
 pub mod dataset;
 mod fuzz;
+mod imitation;
 pub mod learn;
 mod record;
 mod soak;

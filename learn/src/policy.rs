@@ -39,7 +39,7 @@ pub struct ObsNorm {
 pub struct PolicyMeta {
     /// [`POLICY_FORMAT_VERSION`] at writing.
     pub format_version: u32,
-    /// `"ppo"` or `"sac"`.
+    /// `"ppo"`, `"sac"` or `"bc"`.
     pub algo: String,
     /// The environment's identity string.
     pub env: String,
@@ -81,8 +81,8 @@ pub struct Policy {
     device: Device,
 }
 
-#[allow(clippy::too_many_arguments)]
-fn write(dir: &Path, meta: &PolicyMeta, weights: Vec<u8>) -> Result<(), LearnError> {
+/// Writes a policy folder: the weights, then `policy.json` (each atomically).
+pub(crate) fn write(dir: &Path, meta: &PolicyMeta, weights: Vec<u8>) -> Result<(), LearnError> {
     write_atomic(&dir.join("weights.bpk"), &weights)?;
     let json = serde_json::to_string_pretty(meta).map_err(|e| LearnError::Io(e.to_string()))?;
     write_atomic(&dir.join("policy.json"), json.as_bytes())
@@ -274,7 +274,8 @@ impl Policy {
                 let m = ActorCritic::new(&mut rng, meta.obs_dim, meta.act_dim, &cfg, &device);
                 Net::Ppo(load_record(m, &weights)?)
             }
-            "sac" => {
+            // behaviour cloning trains the SAC actor's network
+            "sac" | "bc" => {
                 let cfg = SacConfig {
                     hidden: meta.hidden.clone(),
                     activation: meta.activation,

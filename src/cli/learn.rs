@@ -12,9 +12,12 @@ use crate::learning::{self, TrainRequest, EVAL_SEED};
 pub struct TrainArgs {
     /// A task id (`MoDe-<Robot>-<Task>-v0`) or a scene file with a task section.
     pub target: String,
-    /// `ppo` or `sac`.
+    /// `ppo`, `sac`, or `bc` (behaviour cloning on `--dataset`).
     #[arg(long, default_value = "ppo")]
     pub algo: String,
+    /// The demonstrations for `--algo bc`: a dataset folder of `modesuite record`.
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
     /// Seed of the learner and of the env resets (default: the configuration's, 0).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -79,6 +82,12 @@ pub struct PlotArgs {
 
 /// `modesuite train`.
 pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    if args.algo == "bc" {
+        return super::imitation::train(args, out);
+    }
+    if args.dataset.is_some() {
+        return Err(CliError::input("--dataset: only used with --algo bc"));
+    }
     if args.envs == 0 {
         return Err(CliError::input("--envs = 0: at least 1"));
     }

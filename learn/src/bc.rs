@@ -1,0 +1,263 @@
+//! Behaviour cloning: a deterministic policy regressed on demonstrations (observation, action
+//! pairs) by mean squared error, written as a policy folder like PPO's and SAC's (`algo: "bc"`,
+//! the SAC actor's network: the action is `tanh` of the mean head, scaled into the bounds), so
+//! `Policy::load`, `modesuite eval` and `run --policy` use it unchanged.
+//!
+//! Observations are normalised by the demonstrations' mean and variance (kept in the policy
+//! file); actions are regressed in the `[-1, 1]` units of the squashed head. Training is
+//! minibatch Adam over shuffled epochs, deterministic for a seed.
+
+use std::path::Path;
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::Device;
+use serde::{Deserialize, Serialize};
+
+use crate::config::SacConfig;
+use crate::nets::Activation;
+use crate::policy::{self, ObsNorm, PolicyMeta, POLICY_FORMAT_VERSION};
+use crate::ppo::{record_bytes, NORM_EPS};
+use crate::rng::Rng;
+use crate::sac::SacActor;
+use crate::tensors::{scalar, tensor2};
+use crate::LearnError;
+
+/// Settings of behaviour cloning.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BcConfig {
+    /// Hidden widths.
+    pub hidden: Vec<usize>,
+    /// Hidden nonlinearity.
+    pub activation: Activation,
+    /// Adam's learning rate.
+    pub learning_rate: f64,
+    /// Passes over the demonstrations.
+    pub epochs: usize,
+    /// Samples per gradient step.
+    pub batch_size: usize,
+    /// Seed of the initial weights and the shuffling.
+    pub seed: u64,
+    /// Normalised observations are clipped to +-this.
+    pub obs_clip: f64,
+}
+
+impl Default for BcConfig {
+    fn default() -> Self {
+        Self {
+            hidden: vec![256, 256],
+            activation: Activation::Elu,
+            learning_rate: 1e-3,
+            epochs: 300,
+            batch_size: 256,
+            seed: 0,
+            obs_clip: 10.0,
+        }
+    }
+}
+
+impl BcConfig {
+    /// Checks the settings; the message names the field.
+    pub fn validate(&self) -> Result<(), LearnError> {
+        let bad = |m: String| Err(LearnError::Config(m));
+        if self.hidden.is_empty() || self.hidden.contains(&0) {
+            return bad(format!(
+                "hidden = {:?}: at least one layer of >= 1 units",
+                self.hidden
+            ));
+        }
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return bad(format!("learning_rate = {}: > 0", self.learning_rate));
+        }
+        if self.epochs == 0 || self.batch_size == 0 {
+            return bad(format!(
+                "epochs = {}, batch_size = {}: each >= 1",
+                self.epochs, self.batch_size
+            ));
+        }
+        if !(self.obs_clip.is_finite() && self.obs_clip > 0.0) {
+            return bad(format!("obs_clip = {}: > 0", self.obs_clip));
+        }
+        Ok(())
+    }
+}
+
+/// Demonstrations: one observation and the action taken per sample, row-major.
+#[derive(Clone, Debug, Default)]
+pub struct Demos {
+    /// Observations (`samples x obs_dim`).
+    pub obs: Vec<f32>,
+    /// Actions (`samples x act_dim`).
+    pub act: Vec<f32>,
+    /// Observation length.
+    pub obs_dim: usize,
+    /// Action length.
+    pub act_dim: usize,
+    /// Lower action bounds (finite).
+    pub low: Vec<f32>,
+    /// Upper action bounds (finite).
+    pub high: Vec<f32>,
+}
+
+impl Demos {
+    /// Samples.
+    pub fn len(&self) -> usize {
+        self.obs.len() / self.obs_dim.max(1)
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// What a behaviour-cloning run did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BcSummary {
+    /// Samples trained on.
+    pub samples: usize,
+    /// Mean squared error of the last epoch (in the squashed units).
+    pub final_loss: f64,
+    /// Gradient steps taken.
+    pub steps: u64,
+}
+
+fn normaliser(d: &Demos, clip: f64) -> ObsNorm {
+    let n = d.len().max(1) as f64;
+    let mut mean = vec![0.0; d.obs_dim];
+    let mut var = vec![0.0; d.obs_dim];
+    for row in d.obs.chunks_exact(d.obs_dim) {
+        for (k, x) in row.iter().enumerate() {
+            mean[k] += f64::from(*x) / n;
+        }
+    }
+    for row in d.obs.chunks_exact(d.obs_dim) {
+        for (k, x) in row.iter().enumerate() {
+            var[k] += (f64::from(*x) - mean[k]).powi(2) / n;
+        }
+    }
+    ObsNorm {
+        mean,
+        var,
+        eps: NORM_EPS,
+        clip,
+    }
+}
+
+/// Trains a policy on `demos` and writes it into `out` (`policy.json`, `weights.bpk`);
+/// `progress(epoch, loss)` after each epoch. `env` is the environment's identity string and
+/// `note` the policy's note (the CLI records the target and action modes there).
+pub fn train_bc(
+    demos: &Demos,
+    cfg: &BcConfig,
+    env: &str,
+    note: &str,
+    out: &Path,
+    mut progress: impl FnMut(usize, f64),
+) -> Result<BcSummary, LearnError> {
+    cfg.validate()?;
+    let (od, ad, n) = (demos.obs_dim, demos.act_dim, demos.len());
+    if n == 0 || od == 0 || ad == 0 || demos.act.len() != n * ad {
+        return Err(LearnError::Config(format!(
+            "demonstrations: {n} samples of {od} observation and {ad} action values ({} actions given)",
+            demos.act.len()
+        )));
+    }
+    if demos.low.len() != ad || demos.high.len() != ad {
+        return Err(LearnError::Config(
+            "action bounds: one low and high per action value".into(),
+        ));
+    }
+    let norm = normaliser(demos, cfg.obs_clip);
+    let obs: Vec<f32> = demos
+        .obs
+        .chunks_exact(od)
+        .flat_map(|row| {
+            row.iter().enumerate().map(|(k, x)| {
+                let z = (f64::from(*x) - norm.mean[k]) / (norm.var[k] + norm.eps).sqrt();
+                z.clamp(-norm.clip, norm.clip) as f32
+            })
+        })
+        .collect();
+    // targets in the squashed head's units, kept off +-1 where tanh has no preimage
+    let target: Vec<f32> = demos
+        .act
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let (l, h) = (demos.low[i % ad], demos.high[i % ad]);
+            let u = if h > l {
+                2.0 * (a - l) / (h - l) - 1.0
+            } else {
+                0.0
+            };
+            u.clamp(-0.999, 0.999)
+        })
+        .collect();
+    let device = Device::flex().autodiff();
+    let mut rng = Rng::new(cfg.seed);
+    let sac = SacConfig {
+        hidden: cfg.hidden.clone(),
+        activation: cfg.activation,
+        ..SacConfig::default()
+    };
+    let mut actor = SacActor::new(&mut rng, od, ad, &sac, &device);
+    let mut opt = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut order: Vec<usize> = (0..n).collect();
+    let (mut final_loss, mut steps) = (0.0, 0u64);
+    let b = cfg.batch_size.min(n);
+    for epoch in 0..cfg.epochs {
+        rng.shuffle(&mut order);
+        let (mut sum, mut count) = (0.0, 0usize);
+        for chunk in order.chunks(b) {
+            let rows = chunk.len();
+            let mut x = Vec::with_capacity(rows * od);
+            let mut y = Vec::with_capacity(rows * ad);
+            for &i in chunk {
+                x.extend_from_slice(&obs[i * od..(i + 1) * od]);
+                y.extend_from_slice(&target[i * ad..(i + 1) * ad]);
+            }
+            let pred = actor.mean_action(tensor2(&x, rows, od, &device));
+            let loss = (pred - tensor2(&y, rows, ad, &device)).square().mean();
+            let grads = GradientsParams::from_grads(loss.backward(), &actor);
+            actor = opt.step(cfg.learning_rate, actor, grads);
+            let l = f64::from(scalar(loss));
+            if !l.is_finite() {
+                return Err(LearnError::Diverged(format!(
+                    "behaviour cloning: the loss became {l} in epoch {epoch}"
+                )));
+            }
+            sum += l * rows as f64;
+            count += rows;
+            steps += 1;
+        }
+        final_loss = sum / count.max(1) as f64;
+        progress(epoch, final_loss);
+    }
+    let meta = PolicyMeta {
+        format_version: POLICY_FORMAT_VERSION,
+        algo: "bc".into(),
+        env: env.to_string(),
+        obs_dim: od,
+        act_dim: ad,
+        low: demos.low.clone(),
+        high: demos.high.clone(),
+        hidden: cfg.hidden.clone(),
+        activation: cfg.activation,
+        separate: false,
+        obs_norm: Some(norm),
+        iteration: cfg.epochs as u64,
+        env_steps: n as u64,
+        config_ron: ron::ser::to_string_pretty(cfg, ron::ser::PrettyConfig::default())
+            .map_err(|e| LearnError::Config(e.to_string()))?,
+        note: note.to_string(),
+    };
+    std::fs::create_dir_all(out).map_err(|e| LearnError::Io(format!("{}: {e}", out.display())))?;
+    policy::write(out, &meta, record_bytes(actor.valid())?)?;
+    Ok(BcSummary {
+        samples: n,
+        final_loss,
+        steps,
+    })
+}

@@ -1,0 +1,193 @@
+//! Imitation learning from recorded datasets: `train TARGET --algo bc --dataset DIR --out DIR`
+//! (behaviour cloning on the state observations, [`modesuite_learn::bc`]); the policy it writes
+//! is evaluated by `eval` and `run --policy` like PPO's and SAC's.
+
+use std::io::{IsTerminal, Write};
+use std::path::Path;
+
+use serde_json::json;
+
+use modesuite_dataset::{Column, Dataset};
+use modesuite_learn::bc::{train_bc, BcConfig, Demos};
+
+use super::learn::TrainArgs;
+use super::{io, CliError};
+use crate::gym::layout::ActLayout;
+use crate::make::{self, MakeOptions};
+
+/// The demonstrations of every episode of `ds` (`observation.state` and `action`).
+fn demos(ds: &Dataset, low: Vec<f32>, high: Vec<f32>) -> Result<Demos, CliError> {
+    let mut d = Demos {
+        low,
+        high,
+        ..Demos::default()
+    };
+    for i in 0..ds.episodes.len() {
+        let cols = ds
+            .read_episode(i)
+            .map_err(|e| CliError::input(e.to_string()))?;
+        let get = |n: &str| cols.iter().find(|(c, _)| c == n).map(|(_, c)| c);
+        let (Some(Column::F32 { dim: od, values: o }), Some(Column::F32 { dim: ad, values: a })) =
+            (get("observation.state"), get("action"))
+        else {
+            return Err(CliError::input(format!(
+                "{}: episode {i} has no float observation.state and action",
+                ds.dir.display()
+            )));
+        };
+        d.obs_dim = *od;
+        d.act_dim = *ad;
+        d.obs.extend_from_slice(o);
+        d.act.extend_from_slice(a);
+    }
+    Ok(d)
+}
+
+/// The behaviour-cloning settings: defaults, `--config FILE` (RON `BcConfig`), each `--set
+/// key=value` (JSON value), then `--seed`.
+fn config(args: &TrainArgs) -> Result<BcConfig, CliError> {
+    let mut cfg = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| CliError::input(format!("--config {}: {e}", path.display())))?;
+            ron::from_str::<BcConfig>(&text).map_err(|e| {
+                CliError::input(format!(
+                    "--config {}:{}: {}",
+                    path.display(),
+                    e.span.start,
+                    e.code
+                ))
+            })?
+        }
+        None => BcConfig::default(),
+    };
+    let mut v = serde_json::to_value(&cfg).map_err(|e| CliError::runtime(e.to_string()))?;
+    for kv in &args.set {
+        let (k, val) = kv
+            .split_once('=')
+            .ok_or_else(|| CliError::input(format!("--set {kv}: key=value")))?;
+        if v.get(k).is_none() {
+            let keys: Vec<_> = v
+                .as_object()
+                .map(|m| m.keys().cloned().collect())
+                .unwrap_or_default();
+            return Err(CliError::input(format!(
+                "--set {k}: not a behaviour-cloning setting ({})",
+                keys.join(", ")
+            )));
+        }
+        let parsed: serde_json::Value = serde_json::from_str(val)
+            .or_else(|_| serde_json::from_str(&format!("\"{val}\"")))
+            .map_err(|e| CliError::input(format!("--set {kv}: {e}")))?;
+        v[k] = parsed;
+    }
+    cfg = serde_json::from_value(v).map_err(|e| CliError::input(format!("--set: {e}")))?;
+    if let Some(s) = args.seed {
+        cfg.seed = s;
+    }
+    cfg.validate().map_err(|e| CliError::input(e.to_string()))?;
+    Ok(cfg)
+}
+
+/// `modesuite train TARGET --algo bc --dataset DIR --out DIR`.
+pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let dir = args.dataset.as_deref().ok_or_else(|| {
+        CliError::input("--algo bc needs --dataset DIR (a dataset of `modesuite record`)")
+    })?;
+    let ds = Dataset::open(dir).map_err(|e| CliError::input(e.to_string()))?;
+    let recorded = ds.extra["target"].as_str().unwrap_or_default();
+    if recorded != args.target {
+        return Err(CliError::input(format!(
+            "--dataset {}: recorded on {recorded:?}, not {}",
+            dir.display(),
+            args.target
+        )));
+    }
+    let actions = ds.extra["actions"].as_str().map(str::to_string);
+    if args.actions.is_some() && args.actions != actions {
+        return Err(CliError::input(format!(
+            "--actions {:?}: the dataset was recorded with {actions:?}",
+            args.actions
+        )));
+    }
+    let env = make::make(
+        &args.target,
+        &MakeOptions {
+            actions: actions.clone(),
+            ..Default::default()
+        },
+    )?;
+    let spaces = env.spaces();
+    let act = ActLayout::of(&spaces.action).map_err(CliError::input)?;
+    if act.discrete.is_some() {
+        return Err(CliError::input(
+            "behaviour cloning of discrete actions (a classification head) is not implemented",
+        ));
+    }
+    let demos = demos(&ds, act.low.clone(), act.high.clone())?;
+    if demos.obs_dim != spaces.observation.flat_dim() || demos.act_dim != act.dim {
+        return Err(CliError::input(format!(
+            "--dataset {}: {} observation and {} action values, the env has {} and {}",
+            dir.display(),
+            demos.obs_dim,
+            demos.act_dim,
+            spaces.observation.flat_dim(),
+            act.dim
+        )));
+    }
+    let cfg = config(args)?;
+    let identity = format!(
+        "{} actions {} obs {} act {}",
+        args.target,
+        actions.as_deref().unwrap_or("(scene)"),
+        demos.obs_dim,
+        demos.act_dim
+    );
+    let note = json!({"target": args.target, "actions": actions, "algo": "bc",
+                      "dataset": dir.display().to_string(),
+                      "command": std::env::args().collect::<Vec<_>>().join(" ")})
+    .to_string();
+    writeln!(
+        out,
+        "train bc {} seed {} on {} samples of {} episodes from {} into {}",
+        args.target,
+        cfg.seed,
+        demos.len(),
+        ds.episodes.len(),
+        dir.display(),
+        args.out.display()
+    )
+    .map_err(io)?;
+    let tty = std::io::stderr().is_terminal();
+    let every = (cfg.epochs / 20).max(1);
+    let policy_dir = args.out.join("policy");
+    let summary = train_bc(
+        &demos,
+        &cfg,
+        &identity,
+        &note,
+        &policy_dir,
+        |epoch, loss| {
+            if epoch % every == 0 || epoch + 1 == cfg.epochs {
+                let line = format!("epoch {:>6}/{}  loss {loss:.6}", epoch + 1, cfg.epochs);
+                if tty {
+                    eprint!("\r{line:<60}");
+                } else {
+                    eprintln!("{line}");
+                }
+            }
+        },
+    )
+    .map_err(|e| CliError::runtime(e.to_string()))?;
+    if tty {
+        eprintln!();
+    }
+    writeln!(
+        out,
+        "bc: {} gradient steps, final loss {:.6}; policy {}",
+        summary.steps,
+        summary.final_loss,
+        Path::new(&policy_dir).display()
+    )
+    .map_err(io)
+}
