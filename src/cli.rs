@@ -793,8 +793,8 @@ fn make_run_policy(
 ) -> Result<Box<dyn modesuite_tasks::expert::Policy>, CliError> {
     let path = Path::new(policy);
     if crate::learning::policy_dir(path).is_some() {
-        let (p, _) = crate::learning::load_policy(path).map_err(CliError::input)?;
-        return Ok(Box::new(crate::learning::LearnedPolicy(p)));
+        let (p, _) = crate::learning::load_run_policy(path).map_err(CliError::input)?;
+        return Ok(p);
     }
     let kind: modesuite_tasks::PolicyKind = policy
         .parse()

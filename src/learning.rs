@@ -359,6 +359,52 @@ pub fn load_policy(dir: &Path) -> Result<(modesuite_learn::Policy, PolicyOrigin)
     Ok((policy, PolicyOrigin { target, actions }))
 }
 
+/// Where a policy folder's policy came from (its `policy.json` note), without loading it.
+pub fn policy_origin(dir: &Path) -> Result<PolicyOrigin, String> {
+    let pdir = policy_dir(dir).ok_or_else(|| {
+        format!(
+            "{}: not a policy folder (no policy.json in it or in its policy/)",
+            dir.display()
+        )
+    })?;
+    let path = pdir.join("policy.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let meta: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    let note: serde_json::Value = meta["note"]
+        .as_str()
+        .and_then(|n| serde_json::from_str(n).ok())
+        .unwrap_or_default();
+    let target = note["target"]
+        .as_str()
+        .ok_or_else(|| format!("{}: the policy does not record its target", pdir.display()))?
+        .to_string();
+    let actions = note["actions"].as_str().map(str::to_string);
+    Ok(PolicyOrigin { target, actions })
+}
+
+/// Any policy folder as a policy acting in one env: a trained network (PPO, SAC, BC) or a
+/// retrieval policy (`algo: "retrieval"`, [`crate::retrieval`]).
+pub fn load_run_policy(
+    dir: &Path,
+) -> Result<(Box<dyn modesuite_tasks::expert::Policy>, PolicyOrigin), String> {
+    let origin = policy_origin(dir)?;
+    let Some(pdir) = policy_dir(dir) else {
+        return Err(format!("{}: not a policy folder", dir.display()));
+    };
+    let text = std::fs::read_to_string(pdir.join("policy.json")).unwrap_or_default();
+    let algo = serde_json::from_str::<serde_json::Value>(&text).unwrap_or_default()["algo"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    if algo == "retrieval" {
+        let r = crate::retrieval::Retrieval::load(&pdir)?;
+        return Ok((Box::new(crate::retrieval::RetrievalPolicy(r)), origin));
+    }
+    let (p, origin) = load_policy(dir)?;
+    Ok((Box::new(LearnedPolicy(p)), origin))
+}
+
 /// A learned policy acting in one env (`run --policy DIR`, `eval`).
 pub struct LearnedPolicy(pub modesuite_learn::Policy);
 

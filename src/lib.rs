@@ -25,6 +25,7 @@ pub mod gym;
 pub mod learning;
 pub mod make;
 pub mod plot;
+pub mod retrieval;
 
 use std::sync::Arc;
 

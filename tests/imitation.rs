@@ -1,5 +1,6 @@
-//! Behaviour cloning from a recorded dataset (issue 31, point 4): a policy trained on one
-//! expert demonstration overfits it closely enough to replay it successfully from its seed, and
+//! Behaviour cloning and retrieval from a recorded dataset (issue 31, point 4): a policy trained
+//! on one expert demonstration overfits it closely enough to replay it successfully from its
+//! seed, retrieval replays it exactly, and
 //! the training is deterministic for a seed (the two policies act identically, bit for bit).
 
 use std::path::{Path, PathBuf};
@@ -47,16 +48,18 @@ fn train(data: &Path, out: &Path) -> String {
 #[test]
 fn bc_overfits_one_demonstration_and_replays_it() {
     let data = scratch("data");
-    ok(cli(&[
+    let rec = ok(cli(&[
         "record",
         TASK,
         "--episodes",
         "1",
         "--seed",
         "7",
+        "--json",
         "--out",
         data.to_str().unwrap(),
     ]));
+    let recorded: serde_json::Value = serde_json::from_str(rec.trim()).unwrap();
     let a = scratch("a");
     let log = train(&data, &a);
     println!("{log}");
@@ -113,7 +116,38 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("recorded on"), "{err}");
-    for d in [data, a, b] {
+    // retrieval (k = 1) replays the demonstration exactly: the same return, bit for bit
+    let r = scratch("r");
+    println!(
+        "{}",
+        ok(cli(&[
+            "train",
+            TASK,
+            "--algo",
+            "retrieval",
+            "--dataset",
+            data.to_str().unwrap(),
+            "--out",
+            r.to_str().unwrap()
+        ]))
+    );
+    let run = ok(cli(&[
+        "run",
+        TASK,
+        "--policy",
+        r.to_str().unwrap(),
+        "--seed",
+        "7",
+        "--json",
+    ]));
+    let replayed: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
+    println!("retrieval from the demonstration's seed: {replayed}");
+    assert_eq!(
+        replayed["return"], recorded["return"],
+        "{replayed} vs {recorded}"
+    );
+    assert_eq!(replayed["success"], true);
+    for d in [data, a, b, r] {
         let _ = std::fs::remove_dir_all(d);
     }
 }

@@ -120,8 +120,8 @@ struct Setup {
 fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
     let mut actions = args.actions.clone();
     if actions.is_none() && crate::learning::policy_dir(Path::new(&args.policy)).is_some() {
-        let (_, origin) =
-            crate::learning::load_policy(Path::new(&args.policy)).map_err(CliError::input)?;
+        let origin =
+            crate::learning::policy_origin(Path::new(&args.policy)).map_err(CliError::input)?;
         actions = origin.actions;
     }
     let opts = MakeOptions {

@@ -1,6 +1,7 @@
-//! Imitation learning from recorded datasets: `train TARGET --algo bc --dataset DIR --out DIR`
-//! (behaviour cloning on the state observations, [`modesuite_learn::bc`]); the policy it writes
-//! is evaluated by `eval` and `run --policy` like PPO's and SAC's.
+//! Imitation learning from recorded datasets: `train TARGET --algo bc|retrieval --dataset DIR
+//! --out DIR` (behaviour cloning on the state observations, [`modesuite_learn::bc`], or
+//! nearest-neighbour retrieval, [`crate::retrieval`]); the policy folder it writes is evaluated
+//! by `eval` and `run --policy` like PPO's and SAC's.
 
 use std::io::{IsTerminal, Write};
 use std::path::Path;
@@ -135,6 +136,14 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
             act.dim
         )));
     }
+    let note = json!({"target": args.target, "actions": actions, "algo": args.algo,
+                      "dataset": dir.display().to_string(),
+                      "command": std::env::args().collect::<Vec<_>>().join(" ")})
+    .to_string();
+    let policy_dir = args.out.join("policy");
+    if args.algo == "retrieval" {
+        return retrieval(args, &demos, &note, &policy_dir, ds.episodes.len(), out);
+    }
     let cfg = config(args)?;
     let identity = format!(
         "{} actions {} obs {} act {}",
@@ -143,10 +152,6 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         demos.obs_dim,
         demos.act_dim
     );
-    let note = json!({"target": args.target, "actions": actions, "algo": "bc",
-                      "dataset": dir.display().to_string(),
-                      "command": std::env::args().collect::<Vec<_>>().join(" ")})
-    .to_string();
     writeln!(
         out,
         "train bc {} seed {} on {} samples of {} episodes from {} into {}",
@@ -160,7 +165,6 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     .map_err(io)?;
     let tty = std::io::stderr().is_terminal();
     let every = (cfg.epochs / 20).max(1);
-    let policy_dir = args.out.join("policy");
     let summary = train_bc(
         &demos,
         &cfg,
@@ -187,7 +191,49 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         "bc: {} gradient steps, final loss {:.6}; policy {}",
         summary.steps,
         summary.final_loss,
-        Path::new(&policy_dir).display()
+        policy_dir.display()
+    )
+    .map_err(io)
+}
+
+/// `train --algo retrieval`: every demonstration frame kept; `--set k=N` neighbours (default 1).
+fn retrieval(
+    args: &TrainArgs,
+    demos: &Demos,
+    note: &str,
+    policy_dir: &Path,
+    episodes: usize,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    if args.config.is_some() {
+        return Err(CliError::input(
+            "--config: retrieval has one setting, --set k=N",
+        ));
+    }
+    let mut k = 1usize;
+    for kv in &args.set {
+        match kv.split_once('=') {
+            Some(("k", v)) => {
+                k = v.trim().parse().ok().filter(|k| *k >= 1).ok_or_else(|| {
+                    CliError::input(format!("--set {kv}: k is a whole number >= 1"))
+                })?
+            }
+            _ => {
+                return Err(CliError::input(format!(
+                    "--set {kv}: retrieval has one setting, k=N"
+                )))
+            }
+        }
+    }
+    let r =
+        crate::retrieval::Retrieval::new(&demos.obs, &demos.act, demos.obs_dim, demos.act_dim, k);
+    r.save(policy_dir, note).map_err(CliError::runtime)?;
+    writeln!(
+        out,
+        "retrieval {}: {} frames of {episodes} episodes, k = {k}; policy {}",
+        args.target,
+        r.len(),
+        policy_dir.display()
     )
     .map_err(io)
 }

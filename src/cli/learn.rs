@@ -12,10 +12,11 @@ use crate::learning::{self, TrainRequest, EVAL_SEED};
 pub struct TrainArgs {
     /// A task id (`MoDe-<Robot>-<Task>-v0`) or a scene file with a task section.
     pub target: String,
-    /// `ppo`, `sac`, or `bc` (behaviour cloning on `--dataset`).
+    /// `ppo`, `sac`, or on `--dataset`'s demonstrations `bc` (behaviour cloning) or
+    /// `retrieval` (nearest neighbours).
     #[arg(long, default_value = "ppo")]
     pub algo: String,
-    /// The demonstrations for `--algo bc`: a dataset folder of `modesuite record`.
+    /// The demonstrations for `--algo bc|retrieval`: a dataset folder of `modesuite record`.
     #[arg(long)]
     pub dataset: Option<PathBuf>,
     /// Seed of the learner and of the env resets (default: the configuration's, 0).
@@ -82,11 +83,13 @@ pub struct PlotArgs {
 
 /// `modesuite train`.
 pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    if args.algo == "bc" {
+    if args.algo == "bc" || args.algo == "retrieval" {
         return super::imitation::train(args, out);
     }
     if args.dataset.is_some() {
-        return Err(CliError::input("--dataset: only used with --algo bc"));
+        return Err(CliError::input(
+            "--dataset: only used with --algo bc or retrieval",
+        ));
     }
     if args.envs == 0 {
         return Err(CliError::input("--envs = 0: at least 1"));
@@ -165,7 +168,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
 
 /// `modesuite eval`: `run` of the policy's target with the policy acting.
 pub fn eval(args: &EvalArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let (_, origin) = learning::load_policy(&args.dir).map_err(CliError::input)?;
+    let origin = learning::policy_origin(&args.dir).map_err(CliError::input)?;
     let run_args = RunArgs {
         target: origin.target,
         steps: None,

@@ -1,0 +1,269 @@
+//! Retrieval: nearest-neighbour imitation over demonstration frames, in the spirit of VINN
+//! (Pari et al.) and DeMoBot: the policy keeps every demonstration frame's observation and
+//! action; for an observation it finds the `k` nearest frames (Euclidean distance after scaling
+//! each observation value by the demonstrations' standard deviation) and returns their actions'
+//! mean weighted by `1 / distance` (a frame at distance 0 alone decides). With `k = 1` this
+//! replays the matched frame's action, so a demonstration started from its own seed is replayed
+//! exactly. Observations are the state vector (image features are not built yet).
+//!
+//! A retrieval policy is a folder like a trained one: `policy.json` (`algo: "retrieval"`,
+//! sizes, `k`, the note with target and action modes) and `retrieval.bin` (little-endian f32:
+//! the scales, the scaled observations, the actions).
+
+use std::path::Path;
+
+use serde_json::json;
+
+/// Version of the retrieval folder's layout.
+pub const RETRIEVAL_FORMAT_VERSION: u64 = 1;
+/// Largest number of frames a retrieval policy may declare (a damaged file must not make
+/// loading allocate without bound).
+const MAX_FRAMES: usize = 1 << 24;
+
+/// A nearest-neighbour policy over demonstration frames.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Retrieval {
+    obs_dim: usize,
+    act_dim: usize,
+    k: usize,
+    scale: Vec<f32>,
+    obs: Vec<f32>,
+    act: Vec<f32>,
+}
+
+impl Retrieval {
+    /// The policy of frames `obs` (`n x obs_dim`) and their actions (`n x act_dim`); `k >= 1`.
+    pub fn new(obs: &[f32], act: &[f32], obs_dim: usize, act_dim: usize, k: usize) -> Self {
+        let n = obs.len() / obs_dim.max(1);
+        let mut scale = vec![1.0f32; obs_dim];
+        for (d, s) in scale.iter_mut().enumerate() {
+            let mean =
+                (0..n).map(|i| f64::from(obs[i * obs_dim + d])).sum::<f64>() / n.max(1) as f64;
+            let var = (0..n)
+                .map(|i| (f64::from(obs[i * obs_dim + d]) - mean).powi(2))
+                .sum::<f64>()
+                / n.max(1) as f64;
+            *s = (1.0 / var.sqrt().max(1e-6)) as f32;
+        }
+        let scaled = obs
+            .chunks_exact(obs_dim)
+            .flat_map(|row| row.iter().zip(&scale).map(|(x, s)| x * s))
+            .collect();
+        Self {
+            obs_dim,
+            act_dim,
+            k: k.max(1),
+            scale,
+            obs: scaled,
+            act: act.to_vec(),
+        }
+    }
+
+    /// Frames held.
+    pub fn len(&self) -> usize {
+        self.obs.len() / self.obs_dim.max(1)
+    }
+
+    /// Whether it holds none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Observation length.
+    pub fn obs_dim(&self) -> usize {
+        self.obs_dim
+    }
+
+    /// Action length.
+    pub fn act_dim(&self) -> usize {
+        self.act_dim
+    }
+
+    /// The `k` frames nearest to `obs` as `(frame, distance)`, nearest first (ties: the
+    /// earlier frame).
+    pub fn nearest(&self, obs: &[f32], k: usize) -> Vec<(usize, f32)> {
+        let q: Vec<f32> = obs.iter().zip(&self.scale).map(|(x, s)| x * s).collect();
+        let mut d: Vec<(usize, f32)> = self
+            .obs
+            .chunks_exact(self.obs_dim)
+            .enumerate()
+            .map(|(i, row)| {
+                let s: f32 = row.iter().zip(&q).map(|(a, b)| (a - b) * (a - b)).sum();
+                (i, s.sqrt())
+            })
+            .collect();
+        d.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        d.truncate(k);
+        d
+    }
+
+    /// The action for `obs` (see the module).
+    pub fn act(&self, obs: &[f32]) -> Vec<f32> {
+        let near = self.nearest(obs, self.k);
+        let row = |i: usize| &self.act[i * self.act_dim..(i + 1) * self.act_dim];
+        if let Some(&(i, d)) = near.first() {
+            if d == 0.0 || near.len() == 1 {
+                return row(i).to_vec();
+            }
+        }
+        let mut out = vec![0.0f64; self.act_dim];
+        let mut total = 0.0f64;
+        for (i, d) in near {
+            let w = 1.0 / f64::from(d);
+            total += w;
+            for (o, a) in out.iter_mut().zip(row(i)) {
+                *o += w * f64::from(*a);
+            }
+        }
+        out.iter().map(|o| (o / total.max(1e-300)) as f32).collect()
+    }
+
+    /// Writes the policy folder `dir` (`policy.json` last, each file atomically).
+    pub fn save(&self, dir: &Path, note: &str) -> Result<(), String> {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let mut bytes =
+            Vec::with_capacity(4 * (self.scale.len() + self.obs.len() + self.act.len()));
+        for v in self.scale.iter().chain(&self.obs).chain(&self.act) {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        let bin = dir.join("retrieval.bin");
+        modesuite_engine::fsio::write_atomic(&bin, &bytes)
+            .map_err(|e| format!("{}: {e}", bin.display()))?;
+        let meta = json!({"format_version": RETRIEVAL_FORMAT_VERSION, "algo": "retrieval",
+                          "obs_dim": self.obs_dim, "act_dim": self.act_dim, "k": self.k,
+                          "frames": self.len(), "note": note});
+        let path = dir.join("policy.json");
+        let text = serde_json::to_string_pretty(&meta).map_err(|e| e.to_string())?;
+        modesuite_engine::fsio::write_atomic(&path, text.as_bytes())
+            .map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    /// Reads a policy folder written by [`Retrieval::save`]; errors name the file and field.
+    pub fn load(dir: &Path) -> Result<Self, String> {
+        let path = dir.join("policy.json");
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let meta: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let field = |k: &str| -> Result<usize, String> {
+            meta[k]
+                .as_u64()
+                .map(|v| v as usize)
+                .ok_or_else(|| format!("{}: {k} is missing or not a count", path.display()))
+        };
+        let (od, ad, k, n) = (
+            field("obs_dim")?,
+            field("act_dim")?,
+            field("k")?,
+            field("frames")?,
+        );
+        if meta["format_version"].as_u64() != Some(RETRIEVAL_FORMAT_VERSION) {
+            return Err(format!(
+                "{}: format_version: this build reads {RETRIEVAL_FORMAT_VERSION}",
+                path.display()
+            ));
+        }
+        if !(1..=1 << 20).contains(&od)
+            || !(1..=1 << 20).contains(&ad)
+            || k == 0
+            || !(1..=MAX_FRAMES).contains(&n)
+        {
+            return Err(format!(
+                "{}: obs_dim = {od}, act_dim = {ad}, k = {k}, frames = {n}: each >= 1 (frames at most {MAX_FRAMES})",
+                path.display()
+            ));
+        }
+        let bin = dir.join("retrieval.bin");
+        let bytes = std::fs::read(&bin).map_err(|e| format!("{}: {e}", bin.display()))?;
+        let want = 4 * (od + n * od + n * ad);
+        if bytes.len() != want {
+            return Err(format!(
+                "{}: {} bytes, the sizes in policy.json need {want}",
+                bin.display(),
+                bytes.len()
+            ));
+        }
+        let v: Vec<f32> = bytes
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(format!(
+                "{}: non-finite values (a damaged file?)",
+                bin.display()
+            ));
+        }
+        Ok(Self {
+            obs_dim: od,
+            act_dim: ad,
+            k,
+            scale: v[..od].to_vec(),
+            obs: v[od..od + n * od].to_vec(),
+            act: v[od + n * od..].to_vec(),
+        })
+    }
+}
+
+/// A retrieval policy acting in one env (`run --policy DIR`, `eval`).
+pub struct RetrievalPolicy(pub Retrieval);
+
+impl modesuite_tasks::expert::Policy for RetrievalPolicy {
+    fn act(
+        &mut self,
+        env: &modesuite_engine::prelude::Env,
+        action: &mut [f32],
+    ) -> Result<(), String> {
+        let obs = env.observation();
+        if obs.len() != self.0.obs_dim() || action.len() != self.0.act_dim() {
+            return Err(format!(
+                "the retrieval policy takes {} observation values and gives {} action values; this env has {} and {}",
+                self.0.obs_dim(),
+                self.0.act_dim(),
+                obs.len(),
+                action.len()
+            ));
+        }
+        action.copy_from_slice(&self.0.act(&obs));
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn demo() -> Retrieval {
+        // 5 frames of 3 values, 2 action values
+        let obs: Vec<f32> = (0..15).map(|i| (i * i % 7) as f32 - 2.0).collect();
+        let act: Vec<f32> = (0..10).map(|i| i as f32 * 0.1).collect();
+        Retrieval::new(&obs, &act, 3, 2, 3)
+    }
+
+    #[test]
+    fn a_demonstration_frame_retrieves_itself_at_distance_zero() {
+        let r = demo();
+        let obs: Vec<f32> = (0..15).map(|i| (i * i % 7) as f32 - 2.0).collect();
+        let act: Vec<f32> = (0..10).map(|i| i as f32 * 0.1).collect();
+        for f in 0..5 {
+            let near = r.nearest(&obs[f * 3..(f + 1) * 3], 3);
+            println!("frame {f}: nearest {near:?}");
+            assert_eq!(near[0], (f, 0.0));
+            assert_eq!(
+                r.act(&obs[f * 3..(f + 1) * 3]),
+                act[f * 2..f * 2 + 2].to_vec()
+            );
+        }
+    }
+
+    #[test]
+    fn save_and_load_round_trip_and_damage_is_refused() {
+        let r = demo();
+        let dir = std::env::temp_dir().join(format!("modesuite-retrieval-{}", std::process::id()));
+        r.save(&dir, "{}").unwrap();
+        assert_eq!(Retrieval::load(&dir).unwrap(), r);
+        std::fs::write(dir.join("retrieval.bin"), [0u8; 8]).unwrap();
+        let e = Retrieval::load(&dir).unwrap_err();
+        assert!(e.contains("retrieval.bin") && e.contains("bytes"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
