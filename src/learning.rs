@@ -408,19 +408,30 @@ pub fn load_run_policy(
 /// A learned policy acting in one env (`run --policy DIR`, `eval`).
 pub struct LearnedPolicy(pub modesuite_learn::Policy);
 
+/// Acts in `env` with `f`, a function of the state observation of a policy that takes
+/// `obs_dim` values and gives `act_dim`; a mismatched env is an error naming both sizes.
+pub fn act_on_state(
+    env: &Env,
+    action: &mut [f32],
+    obs_dim: usize,
+    act_dim: usize,
+    f: impl FnOnce(&[f32]) -> Vec<f32>,
+) -> Result<(), String> {
+    let obs = env.observation();
+    if obs.len() != obs_dim || action.len() != act_dim {
+        return Err(format!(
+            "the policy takes {obs_dim} observation values and gives {act_dim} action values; this env has {} and {}",
+            obs.len(),
+            action.len()
+        ));
+    }
+    action.copy_from_slice(&f(&obs));
+    Ok(())
+}
+
 impl modesuite_tasks::expert::Policy for LearnedPolicy {
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
-        let obs = env.observation();
-        if obs.len() != self.0.obs_dim() || action.len() != self.0.act_dim() {
-            return Err(format!(
-                "the policy takes {} observation values and gives {} action values; this env has {} and {}",
-                self.0.obs_dim(),
-                self.0.act_dim(),
-                obs.len(),
-                action.len()
-            ));
-        }
-        action.copy_from_slice(&self.0.act(&obs));
-        Ok(())
+        let p = &self.0;
+        act_on_state(env, action, p.obs_dim(), p.act_dim(), |o| p.act(o))
     }
 }

@@ -213,18 +213,8 @@ impl modesuite_tasks::expert::Policy for RetrievalPolicy {
         env: &modesuite_engine::prelude::Env,
         action: &mut [f32],
     ) -> Result<(), String> {
-        let obs = env.observation();
-        if obs.len() != self.0.obs_dim() || action.len() != self.0.act_dim() {
-            return Err(format!(
-                "the retrieval policy takes {} observation values and gives {} action values; this env has {} and {}",
-                self.0.obs_dim(),
-                self.0.act_dim(),
-                obs.len(),
-                action.len()
-            ));
-        }
-        action.copy_from_slice(&self.0.act(&obs));
-        Ok(())
+        let r = &self.0;
+        crate::learning::act_on_state(env, action, r.obs_dim(), r.act_dim(), |o| r.act(o))
     }
 }
 
