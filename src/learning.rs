@@ -234,31 +234,38 @@ pub fn resolve_config(req: &TrainRequest) -> Result<(AlgoConfig, Vec<PathBuf>), 
 /// `null`, `true`) or else as a string.
 pub fn set_field(cfg: &AlgoConfig, kv: &str) -> Result<AlgoConfig, String> {
     let bad = |m: &str| format!("--set {kv}: {m}");
-    let (key, value) = kv
-        .split_once('=')
-        .ok_or_else(|| bad("key=value, e.g. learning_rate=3e-4"))?;
     let mut v = serde_json::to_value(cfg).map_err(|e| bad(&e.to_string()))?;
     let fields = v
         .as_object_mut()
         .and_then(|o| o.values_mut().next())
         .and_then(|inner| inner.as_object_mut())
         .ok_or_else(|| bad("unreadable configuration"))?;
+    set_json_field(fields, kv)?;
+    serde_json::from_value(v).map_err(|e| bad(&e.to_string()))
+}
+
+/// Replaces one existing field of a serialised configuration: `key=value`, the value read as
+/// JSON or else as a string; an unknown key is an error listing the valid ones.
+pub fn set_json_field(
+    fields: &mut serde_json::Map<String, serde_json::Value>,
+    kv: &str,
+) -> Result<(), String> {
+    let bad = |m: &str| format!("--set {kv}: {m}");
+    let (key, value) = kv
+        .split_once('=')
+        .ok_or_else(|| bad("key=value, e.g. learning_rate=3e-4"))?;
     if !fields.contains_key(key.trim()) {
-        let mut names: Vec<&String> = fields.keys().collect();
+        let mut names: Vec<&str> = fields.keys().map(String::as_str).collect();
         names.sort();
         return Err(bad(&format!(
             "no such hyper-parameter; valid: {}",
-            names
-                .iter()
-                .map(|s| s.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
+            names.join(", ")
         )));
     }
     let parsed = serde_json::from_str(value.trim())
         .unwrap_or_else(|_| serde_json::Value::String(value.trim().to_string()));
     fields.insert(key.trim().to_string(), parsed);
-    serde_json::from_value(v).map_err(|e| bad(&e.to_string()))
+    Ok(())
 }
 
 /// How a `train` call went: the learner's summary and where this call's time went.
@@ -350,17 +357,12 @@ pub fn load_policy(dir: &Path) -> Result<(modesuite_learn::Policy, PolicyOrigin)
         )
     })?;
     let policy = modesuite_learn::Policy::load(&pdir).map_err(|e| e.to_string())?;
-    let note: serde_json::Value = serde_json::from_str(&policy.meta().note).unwrap_or_default();
-    let target = note["target"]
-        .as_str()
-        .ok_or_else(|| format!("{}: the policy does not record its target", pdir.display()))?
-        .to_string();
-    let actions = note["actions"].as_str().map(str::to_string);
-    Ok((policy, PolicyOrigin { target, actions }))
+    let origin = origin_of(&pdir, &serde_json::json!({ "note": policy.meta().note }))?;
+    Ok((policy, origin))
 }
 
-/// Where a policy folder's policy came from (its `policy.json` note), without loading it.
-pub fn policy_origin(dir: &Path) -> Result<PolicyOrigin, String> {
+/// A policy folder's `policy.json` (in it or in its `policy/`): the folder and the parsed file.
+fn policy_json(dir: &Path) -> Result<(PathBuf, serde_json::Value), String> {
     let pdir = policy_dir(dir).ok_or_else(|| {
         format!(
             "{}: not a policy folder (no policy.json in it or in its policy/)",
@@ -369,8 +371,12 @@ pub fn policy_origin(dir: &Path) -> Result<PolicyOrigin, String> {
     })?;
     let path = pdir.join("policy.json");
     let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let meta: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    let meta = serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok((pdir, meta))
+}
+
+/// Where a policy came from, from its `policy.json`'s note.
+fn origin_of(pdir: &Path, meta: &serde_json::Value) -> Result<PolicyOrigin, String> {
     let note: serde_json::Value = meta["note"]
         .as_str()
         .and_then(|n| serde_json::from_str(n).ok())
@@ -383,26 +389,25 @@ pub fn policy_origin(dir: &Path) -> Result<PolicyOrigin, String> {
     Ok(PolicyOrigin { target, actions })
 }
 
+/// Where a policy folder's policy came from (its `policy.json` note), without loading it.
+pub fn policy_origin(dir: &Path) -> Result<PolicyOrigin, String> {
+    let (pdir, meta) = policy_json(dir)?;
+    origin_of(&pdir, &meta)
+}
+
 /// Any policy folder as a policy acting in one env: a trained network (PPO, SAC, BC) or a
 /// retrieval policy (`algo: "retrieval"`, [`crate::retrieval`]).
 pub fn load_run_policy(
     dir: &Path,
 ) -> Result<(Box<dyn modesuite_tasks::expert::Policy>, PolicyOrigin), String> {
-    let origin = policy_origin(dir)?;
-    let Some(pdir) = policy_dir(dir) else {
-        return Err(format!("{}: not a policy folder", dir.display()));
-    };
-    let text = std::fs::read_to_string(pdir.join("policy.json")).unwrap_or_default();
-    let algo = serde_json::from_str::<serde_json::Value>(&text).unwrap_or_default()["algo"]
-        .as_str()
-        .unwrap_or_default()
-        .to_string();
-    if algo == "retrieval" {
+    let (pdir, meta) = policy_json(dir)?;
+    let origin = origin_of(&pdir, &meta)?;
+    if meta["algo"] == "retrieval" {
         let r = crate::retrieval::Retrieval::load(&pdir)?;
         return Ok((Box::new(crate::retrieval::RetrievalPolicy(r)), origin));
     }
-    let (p, origin) = load_policy(dir)?;
-    Ok((Box::new(LearnedPolicy(p)), origin))
+    let policy = modesuite_learn::Policy::load(&pdir).map_err(|e| e.to_string())?;
+    Ok((Box::new(LearnedPolicy(policy)), origin))
 }
 
 /// A learned policy acting in one env (`run --policy DIR`, `eval`).

@@ -220,7 +220,8 @@ impl DatasetWriter {
         let mut episodes = self.episodes.clone();
         episodes.push(meta);
         let mut tasks = self.tasks.clone();
-        if task_index == tasks.len() {
+        let new_task = task_index == tasks.len();
+        if new_task {
             tasks.push(ep.task);
         }
         let mut info = self.info.clone();
@@ -232,7 +233,10 @@ impl DatasetWriter {
             serde_json::Value::from(format!("0:{}", e + 1)),
         )]);
         episodes::write_episodes(&self.dir, &info, &episodes)?;
-        episodes::write_tasks(&self.dir, &tasks)?;
+        // the tasks table changes only with a new task
+        if new_task {
+            episodes::write_tasks(&self.dir, &tasks)?;
+        }
         episodes::write_stats(&self.dir, &info, &episodes)?;
         // the commit
         write_json(&self.dir.join("meta/info.json"), &info)?;

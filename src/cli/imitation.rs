@@ -63,24 +63,10 @@ fn config(args: &TrainArgs) -> Result<BcConfig, CliError> {
         None => BcConfig::default(),
     };
     let mut v = serde_json::to_value(&cfg).map_err(|e| CliError::runtime(e.to_string()))?;
-    for kv in &args.set {
-        let (k, val) = kv
-            .split_once('=')
-            .ok_or_else(|| CliError::input(format!("--set {kv}: key=value")))?;
-        if v.get(k).is_none() {
-            let keys: Vec<_> = v
-                .as_object()
-                .map(|m| m.keys().cloned().collect())
-                .unwrap_or_default();
-            return Err(CliError::input(format!(
-                "--set {k}: not a behaviour-cloning setting ({})",
-                keys.join(", ")
-            )));
+    if let Some(fields) = v.as_object_mut() {
+        for kv in &args.set {
+            crate::learning::set_json_field(fields, kv).map_err(CliError::input)?;
         }
-        let parsed: serde_json::Value = serde_json::from_str(val)
-            .or_else(|_| serde_json::from_str(&format!("\"{val}\"")))
-            .map_err(|e| CliError::input(format!("--set {kv}: {e}")))?;
-        v[k] = parsed;
     }
     cfg = serde_json::from_value(v).map_err(|e| CliError::input(format!("--set: {e}")))?;
     if let Some(s) = args.seed {
