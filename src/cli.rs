@@ -38,6 +38,7 @@ use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
 
 pub mod dataset;
+pub mod encode;
 mod fuzz;
 mod imitation;
 pub mod learn;
@@ -102,6 +103,9 @@ pub enum Command {
         #[command(subcommand)]
         command: dataset::DatasetCommand,
     },
+    /// Image features of PNG files with an image encoder (`pooled`, or `dinov2` with its
+    /// weights file): what `record --encoder` caches and image policies compute.
+    Encode(encode::EncodeArgs),
     /// Fuzz the input parsers and loaders (scene, task, robot, URDF, actions, meshes, state
     /// files) with mutated inputs; exit 1 if any input panicked, 3 if one hung.
     Fuzz(fuzz::FuzzArgs),
@@ -281,6 +285,7 @@ pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
         Some(Command::Plot(args)) => learn::plot(&args, out),
         Some(Command::Record(args)) => dataset::record(&args, out),
         Some(Command::Dataset { command }) => dataset::dataset(&command, out),
+        Some(Command::Encode(args)) => encode::encode(&args, out),
         Some(Command::Fuzz(args)) => fuzz::fuzz(&args, out),
         Some(Command::Soak(args)) => soak::soak(&args, out),
         Some(Command::Bench {

@@ -318,7 +318,7 @@ pub fn train(
                 "{}: holds another run ({m}); choose another --out or the same settings",
                 req.out.display()
             )),
-            e @ (LearnError::Config(_) | LearnError::Checkpoint(_)) => {
+            e @ (LearnError::Config(_) | LearnError::Checkpoint(_) | LearnError::Weights(_)) => {
                 MakeError::Input(e.to_string())
             }
             e @ (LearnError::Io(_) | LearnError::Env(_) | LearnError::Diverged(_)) => {

@@ -19,6 +19,7 @@ pub mod bc;
 pub mod checkpoint;
 pub mod config;
 pub mod dist;
+pub mod encoder;
 pub mod env;
 pub mod envs;
 pub mod eval;
@@ -87,4 +88,7 @@ pub enum LearnError {
     /// A loss became NaN or infinite; no checkpoint is written from such a state.
     #[error("training diverged: {0}")]
     Diverged(String),
+    /// A weights file (an image encoder's) that does not load: wrong format, names or shapes.
+    #[error("weights: {0}")]
+    Weights(String),
 }
