@@ -8,6 +8,7 @@
 //! defaults, then `scenes/<task>/<algo>.ron` next to the task's scenes, then `--config FILE`,
 //! then each `--set key=value`, then `--seed`.
 
+use crate::inputs::Observer;
 use std::path::{Path, PathBuf};
 
 use modesuite_engine::prelude::*;
@@ -339,6 +340,8 @@ pub struct PolicyOrigin {
     pub target: String,
     /// Action modes it was trained with.
     pub actions: Option<String>,
+    /// What it observes (the state alone unless the note says otherwise).
+    pub inputs: crate::inputs::InputSpec,
 }
 
 /// The `policy/` folder of a run folder, or the folder itself when it holds `policy.json`.
@@ -386,7 +389,16 @@ fn origin_of(pdir: &Path, meta: &serde_json::Value) -> Result<PolicyOrigin, Stri
         .ok_or_else(|| format!("{}: the policy does not record its target", pdir.display()))?
         .to_string();
     let actions = note["actions"].as_str().map(str::to_string);
-    Ok(PolicyOrigin { target, actions })
+    let inputs = match note.get("inputs") {
+        Some(v) => serde_json::from_value(v.clone())
+            .map_err(|e| format!("{}: the note's inputs: {e}", pdir.display()))?,
+        None => crate::inputs::InputSpec::default(),
+    };
+    Ok(PolicyOrigin {
+        target,
+        actions,
+        inputs,
+    })
 }
 
 /// Where a policy folder's policy came from (its `policy.json` note), without loading it.
@@ -396,36 +408,48 @@ pub fn policy_origin(dir: &Path) -> Result<PolicyOrigin, String> {
 }
 
 /// Any policy folder as a policy acting in one env: a trained network (PPO, SAC, BC) or a
-/// retrieval policy (`algo: "retrieval"`, [`crate::retrieval`]).
+/// retrieval policy (`algo: "retrieval"`, [`crate::retrieval`]), observing what its note's
+/// inputs say ([`crate::inputs`]).
 pub fn load_run_policy(
     dir: &Path,
 ) -> Result<(Box<dyn modesuite_tasks::expert::Policy>, PolicyOrigin), String> {
     let (pdir, meta) = policy_json(dir)?;
     let origin = origin_of(&pdir, &meta)?;
+    let inputs = Observer::new(origin.inputs.clone())?;
     if meta["algo"] == "retrieval" {
         let r = crate::retrieval::Retrieval::load(&pdir)?;
-        return Ok((Box::new(crate::retrieval::RetrievalPolicy(r)), origin));
+        return Ok((
+            Box::new(crate::retrieval::RetrievalPolicy { r, inputs }),
+            origin,
+        ));
     }
     let policy = modesuite_learn::Policy::load(&pdir).map_err(|e| e.to_string())?;
-    Ok((Box::new(LearnedPolicy(policy)), origin))
+    Ok((Box::new(LearnedPolicy { policy, inputs }), origin))
 }
 
 /// A learned policy acting in one env (`run --policy DIR`, `eval`).
-pub struct LearnedPolicy(pub modesuite_learn::Policy);
+pub struct LearnedPolicy {
+    /// The network.
+    pub policy: modesuite_learn::Policy,
+    /// What it observes.
+    pub inputs: Observer,
+}
 
-/// Acts in `env` with `f`, a function of the state observation of a policy that takes
+/// Acts in `env` with `f`, a function of the input vector ([`Observer`]) of a policy that takes
 /// `obs_dim` values and gives `act_dim`; a mismatched env is an error naming both sizes.
-pub fn act_on_state(
+pub fn act_on_inputs(
+    inputs: &mut Observer,
     env: &Env,
     action: &mut [f32],
     obs_dim: usize,
     act_dim: usize,
     f: impl FnOnce(&[f32]) -> Vec<f32>,
 ) -> Result<(), String> {
-    let obs = env.observation();
+    let obs = inputs.observe(env)?;
     if obs.len() != obs_dim || action.len() != act_dim {
         return Err(format!(
-            "the policy takes {obs_dim} observation values and gives {act_dim} action values; this env has {} and {}",
+            "the policy takes {obs_dim} input values ({}) and gives {act_dim} action values; this env gives {} and takes {}",
+            inputs.spec().describe(),
             obs.len(),
             action.len()
         ));
@@ -436,7 +460,14 @@ pub fn act_on_state(
 
 impl modesuite_tasks::expert::Policy for LearnedPolicy {
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
-        let p = &self.0;
-        act_on_state(env, action, p.obs_dim(), p.act_dim(), |o| p.act(o))
+        let p = &self.policy;
+        act_on_inputs(
+            &mut self.inputs,
+            env,
+            action,
+            p.obs_dim(),
+            p.act_dim(),
+            |o| p.act(o),
+        )
     }
 }

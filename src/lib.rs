@@ -22,6 +22,7 @@ pub mod cli;
 pub mod episode;
 pub mod fuzz;
 pub mod gym;
+pub mod inputs;
 pub mod learning;
 pub mod make;
 pub mod plot;

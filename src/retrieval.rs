@@ -205,7 +205,12 @@ impl Retrieval {
 }
 
 /// A retrieval policy acting in one env (`run --policy DIR`, `eval`).
-pub struct RetrievalPolicy(pub Retrieval);
+pub struct RetrievalPolicy {
+    /// The demonstration frames.
+    pub r: Retrieval,
+    /// What it observes.
+    pub inputs: crate::inputs::Observer,
+}
 
 impl modesuite_tasks::expert::Policy for RetrievalPolicy {
     fn act(
@@ -213,8 +218,15 @@ impl modesuite_tasks::expert::Policy for RetrievalPolicy {
         env: &modesuite_engine::prelude::Env,
         action: &mut [f32],
     ) -> Result<(), String> {
-        let r = &self.0;
-        crate::learning::act_on_state(env, action, r.obs_dim(), r.act_dim(), |o| r.act(o))
+        let r = &self.r;
+        crate::learning::act_on_inputs(
+            &mut self.inputs,
+            env,
+            action,
+            r.obs_dim(),
+            r.act_dim(),
+            |o| r.act(o),
+        )
     }
 }
 

@@ -151,3 +151,95 @@ fn bc_overfits_one_demonstration_and_replays_it() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// Image inputs: a recording with the robot camera's pooled features cached per frame; a
+/// retrieval policy on the features alone renders and encodes its camera when it acts and, from
+/// the demonstration's seed, finds each recorded frame again (distance 0) and replays the
+/// demonstration exactly. A feature policy on a dataset without features is refused.
+#[test]
+fn retrieval_on_image_features_replays_its_demonstration() {
+    let task = "MoDe-Spot-Uncover-v0";
+    let data = scratch("img-data");
+    let rec = ok(cli(&[
+        "record",
+        task,
+        "--episodes",
+        "1",
+        "--seed",
+        "11",
+        "--cameras",
+        "robot",
+        "--encoder",
+        "pooled",
+        "--json",
+        "--out",
+        data.to_str().unwrap(),
+    ]));
+    let recorded: serde_json::Value = serde_json::from_str(rec.lines().next().unwrap()).unwrap();
+    println!("recorded: {recorded}");
+    assert_eq!(recorded["success"], true);
+    let info = ok(cli(&["dataset", "info", data.to_str().unwrap(), "--json"]));
+    assert!(info.contains("observation.features.pooled"), "{info}");
+    let r = scratch("img-r");
+    let trained = ok(cli(&[
+        "train",
+        task,
+        "--algo",
+        "retrieval",
+        "--inputs",
+        "features",
+        "--dataset",
+        data.to_str().unwrap(),
+        "--out",
+        r.to_str().unwrap(),
+    ]));
+    println!("{trained}");
+    assert!(
+        trained.contains("features (pooled of camera robot)"),
+        "{trained}"
+    );
+    let run = ok(cli(&[
+        "run",
+        task,
+        "--policy",
+        r.to_str().unwrap(),
+        "--seed",
+        "11",
+        "--json",
+    ]));
+    let replayed: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
+    println!("retrieval on image features from the demonstration's seed: {replayed}");
+    assert_eq!(replayed["length"], recorded["length"]);
+    assert_eq!(replayed["return"], recorded["return"]);
+    assert_eq!(replayed["success"], true);
+    // a dataset without features cannot train a feature policy
+    let plain = scratch("img-plain");
+    ok(cli(&[
+        "record",
+        task,
+        "--episodes",
+        "1",
+        "--steps",
+        "5",
+        "--out",
+        plain.to_str().unwrap(),
+    ]));
+    let o = cli(&[
+        "train",
+        task,
+        "--algo",
+        "bc",
+        "--inputs",
+        "features",
+        "--dataset",
+        plain.to_str().unwrap(),
+        "--out",
+        r.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("no image features"), "{err}");
+    for d in [data, r, plain] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}

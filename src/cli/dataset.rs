@@ -19,7 +19,9 @@ use super::record::render_err;
 use super::{io, make_run_policy, CliError};
 use crate::episode::final_success;
 use crate::gym::layout::ActLayout;
+use crate::inputs::{encode_frame, ImageFeatures};
 use crate::make::{self, MakeOptions};
+use modesuite_learn::encoder::ImageEncoder;
 
 /// Arguments of `record`.
 #[derive(clap::Args, Debug)]
@@ -46,6 +48,14 @@ pub struct RecordArgs {
     /// comma-separated; MP4 through ffmpeg.
     #[arg(long, value_delimiter = ',')]
     pub cameras: Vec<String>,
+    /// Caches image features of the first of `--cameras` per frame as
+    /// `observation.features.<ENCODER>` (for `train --inputs features`): `pooled` (weights-free)
+    /// or `dinov2` (needs --weights).
+    #[arg(long)]
+    pub encoder: Option<String>,
+    /// The encoder's weights file (`dinov2`: DINOv2 ViT-S/14 as safetensors).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
     /// The dataset folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -112,6 +122,7 @@ struct Setup {
     env: Env,
     renderer: Option<EnvRenderer>,
     cameras: Vec<CameraDesc>,
+    encoder: Option<Box<dyn ImageEncoder>>,
     info: Info,
     extra: serde_json::Value,
     steps: u64,
@@ -174,6 +185,32 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
             cameras.push(cam);
         }
     }
+    let mut image_features = None;
+    let encoder = match &args.encoder {
+        Some(name) => {
+            let camera = args.cameras.first().ok_or_else(|| {
+                CliError::input("--encoder: needs a camera to encode (--cameras robot)")
+            })?;
+            let enc = super::encode::make_encoder(name, args.weights.as_deref())?;
+            let mut f = Feature::f32(&[]);
+            f.shape = vec![enc.dim()];
+            f.names = serde_json::Value::Null;
+            features.push((format!("observation.features.{name}"), f));
+            image_features = Some(ImageFeatures {
+                encoder: name.clone(),
+                camera: camera.clone(),
+                weights: args
+                    .weights
+                    .as_ref()
+                    .map(|w| w.canonicalize().unwrap_or(w.clone())),
+            });
+            Some(enc)
+        }
+        None if args.weights.is_some() => {
+            return Err(CliError::input("--weights: only with --encoder"))
+        }
+        None => None,
+    };
     let robot = args.target.split('-').nth(1).map(|r| match r {
         "Franka" => "franka_ridgeback".to_string(),
         other => other.to_lowercase(),
@@ -187,6 +224,7 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
         "noise": args.noise,
         "seed": args.seed,
         "cameras": args.cameras,
+        "features": image_features,
         "step_dt": step_dt,
         "modesuite_version": env!("CARGO_PKG_VERSION"),
     });
@@ -195,6 +233,7 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
         env,
         renderer,
         cameras,
+        encoder,
         info,
         extra,
         steps,
@@ -235,6 +274,7 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         mut env,
         mut renderer,
         cameras,
+        encoder,
         info,
         extra,
         steps,
@@ -263,6 +303,7 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         let mut action = vec![0.0f32; act.dim];
         let (mut states, mut actions, mut rewards, mut dones, mut succ) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut feats: Vec<f32> = Vec::new();
         std::fs::create_dir_all(&staging)
             .map_err(|err| CliError::runtime(format!("{}: {err}", staging.display())))?;
         let mut videos: Vec<(PathBuf, VideoWriter, Vec<Vec<u8>>)> = Vec::new();
@@ -278,6 +319,9 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
                 let frames = r
                     .render_cameras(&env.app.world, &cameras)
                     .map_err(render_err)?;
+                if let (Some(enc), Some(frame)) = (&encoder, frames.first()) {
+                    feats.extend(encode_frame(enc.as_ref(), frame).map_err(CliError::runtime)?);
+                }
                 for (frame, (_, w, sampled)) in frames.iter().zip(videos.iter_mut()) {
                     w.push(frame).map_err(render_err)?;
                     if t % 4 == 0 {
@@ -322,33 +366,45 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
             video_inputs.push((path, FeatureStats::of_rgb(&refs)));
         }
         let len = rewards.len();
+        // a step cut short by a policy error rendered a frame it did not record
+        feats.truncate(len * encoder.as_ref().map_or(0, |e| e.dim()));
+        let mut columns = vec![
+            (
+                "observation.state".into(),
+                Column::F32 {
+                    dim: states.len() / len,
+                    values: states,
+                },
+            ),
+            (
+                "action".into(),
+                Column::F32 {
+                    dim: act.dim,
+                    values: actions,
+                },
+            ),
+            (
+                "next.reward".into(),
+                Column::F32 {
+                    dim: 1,
+                    values: rewards,
+                },
+            ),
+            ("next.done".into(), Column::Bool(dones)),
+            ("next.success".into(), Column::Bool(succ)),
+        ];
+        if let Some(enc) = &encoder {
+            columns.push((
+                format!("observation.features.{}", enc.name()),
+                Column::F32 {
+                    dim: enc.dim(),
+                    values: feats,
+                },
+            ));
+        }
         let input = EpisodeInput {
             task: task.clone(),
-            columns: vec![
-                (
-                    "observation.state".into(),
-                    Column::F32 {
-                        dim: states.len() / len,
-                        values: states,
-                    },
-                ),
-                (
-                    "action".into(),
-                    Column::F32 {
-                        dim: act.dim,
-                        values: actions,
-                    },
-                ),
-                (
-                    "next.reward".into(),
-                    Column::F32 {
-                        dim: 1,
-                        values: rewards,
-                    },
-                ),
-                ("next.done".into(), Column::Bool(dones)),
-                ("next.success".into(), Column::Bool(succ)),
-            ],
+            columns,
             videos: video_inputs,
             seed,
             success,

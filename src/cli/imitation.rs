@@ -14,31 +14,45 @@ use modesuite_learn::bc::{train_bc, BcConfig, Demos};
 use super::learn::TrainArgs;
 use super::{io, CliError};
 use crate::gym::layout::ActLayout;
+use crate::inputs::{ImageFeatures, InputSpec};
 use crate::make::{self, MakeOptions};
 
-/// The demonstrations of every episode of `ds` (`observation.state` and `action`).
-fn demos(ds: &Dataset, low: Vec<f32>, high: Vec<f32>) -> Result<Demos, CliError> {
+/// The demonstrations of every episode of `ds`: the inputs `spec` asks for (image features
+/// first, then `observation.state`) and `action`.
+fn demos(ds: &Dataset, spec: &InputSpec, low: Vec<f32>, high: Vec<f32>) -> Result<Demos, CliError> {
     let mut d = Demos {
         low,
         high,
         ..Demos::default()
     };
+    let feature_col = spec.feature_column();
     for i in 0..ds.episodes.len() {
         let cols = ds
             .read_episode(i)
             .map_err(|e| CliError::input(e.to_string()))?;
-        let get = |n: &str| cols.iter().find(|(c, _)| c == n).map(|(_, c)| c);
-        let (Some(Column::F32 { dim: od, values: o }), Some(Column::F32 { dim: ad, values: a })) =
-            (get("observation.state"), get("action"))
-        else {
-            return Err(CliError::input(format!(
-                "{}: episode {i} has no float observation.state and action",
+        let get = |n: &str| match cols.iter().find(|(c, _)| c == n).map(|(_, c)| c) {
+            Some(Column::F32 { dim, values }) => Ok((*dim, values.as_slice())),
+            _ => Err(CliError::input(format!(
+                "{}: episode {i} has no float column {n}",
                 ds.dir.display()
-            )));
+            ))),
         };
-        d.obs_dim = *od;
-        d.act_dim = *ad;
-        d.obs.extend_from_slice(o);
+        let (ad, a) = get("action")?;
+        let mut parts = Vec::new();
+        if let Some(c) = &feature_col {
+            parts.push(get(c)?);
+        }
+        if spec.state {
+            parts.push(get("observation.state")?);
+        }
+        let frames = a.len() / ad.max(1);
+        d.obs_dim = parts.iter().map(|(dim, _)| dim).sum();
+        d.act_dim = ad;
+        for f in 0..frames {
+            for (dim, v) in &parts {
+                d.obs.extend_from_slice(&v[f * dim..(f + 1) * dim]);
+            }
+        }
         d.act.extend_from_slice(a);
     }
     Ok(d)
@@ -111,8 +125,13 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
             "behaviour cloning of discrete actions (a classification head) is not implemented",
         ));
     }
-    let demos = demos(&ds, act.low.clone(), act.high.clone())?;
-    if demos.obs_dim != spaces.observation.flat_dim() || demos.act_dim != act.dim {
+    let features: Option<ImageFeatures> =
+        serde_json::from_value(ds.extra["features"].clone()).unwrap_or(None);
+    let inputs = InputSpec::parse(&args.inputs, features).map_err(CliError::input)?;
+    let demos = demos(&ds, &inputs, act.low.clone(), act.high.clone())?;
+    if (inputs.features.is_none() && demos.obs_dim != spaces.observation.flat_dim())
+        || demos.act_dim != act.dim
+    {
         return Err(CliError::input(format!(
             "--dataset {}: {} observation and {} action values, the env has {} and {}",
             dir.display(),
@@ -123,12 +142,21 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         )));
     }
     let note = json!({"target": args.target, "actions": actions, "algo": args.algo,
-                      "dataset": dir.display().to_string(),
+                      "dataset": dir.display().to_string(), "inputs": inputs,
                       "command": std::env::args().collect::<Vec<_>>().join(" ")})
     .to_string();
     let policy_dir = args.out.join("policy");
     if args.algo == "retrieval" {
-        return retrieval(args, &demos, &note, &policy_dir, ds.episodes.len(), out);
+        let what = inputs.describe();
+        return retrieval(
+            args,
+            &demos,
+            &what,
+            &note,
+            &policy_dir,
+            ds.episodes.len(),
+            out,
+        );
     }
     let cfg = config(args)?;
     let identity = format!(
@@ -140,10 +168,11 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     );
     writeln!(
         out,
-        "train bc {} seed {} on {} samples of {} episodes from {} into {}",
+        "train bc {} seed {} on {} samples ({}) of {} episodes from {} into {}",
         args.target,
         cfg.seed,
         demos.len(),
+        inputs.describe(),
         ds.episodes.len(),
         dir.display(),
         args.out.display()
@@ -186,6 +215,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
 fn retrieval(
     args: &TrainArgs,
     demos: &Demos,
+    inputs: &str,
     note: &str,
     policy_dir: &Path,
     episodes: usize,
@@ -216,8 +246,9 @@ fn retrieval(
     r.save(policy_dir, note).map_err(CliError::runtime)?;
     writeln!(
         out,
-        "retrieval {}: {} frames of {episodes} episodes, k = {k}; policy {}",
+        "retrieval {} ({}): {} frames of {episodes} episodes, k = {k}; policy {}",
         args.target,
+        inputs,
         r.len(),
         policy_dir.display()
     )

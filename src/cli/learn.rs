@@ -19,6 +19,11 @@ pub struct TrainArgs {
     /// The demonstrations for `--algo bc|retrieval`: a dataset folder of `modesuite record`.
     #[arg(long)]
     pub dataset: Option<PathBuf>,
+    /// What `--algo bc|retrieval` policies observe: `state` (the task's observation),
+    /// `features` (the dataset's cached image features, `record --encoder`) or
+    /// `features+state`; the policy renders and encodes its camera when it acts.
+    #[arg(long, default_value = "state")]
+    pub inputs: String,
     /// Seed of the learner and of the env resets (default: the configuration's, 0).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -89,6 +94,11 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     if args.dataset.is_some() {
         return Err(CliError::input(
             "--dataset: only used with --algo bc or retrieval",
+        ));
+    }
+    if args.inputs != "state" {
+        return Err(CliError::input(
+            "--inputs: only used with --algo bc or retrieval (PPO and SAC observe the state)",
         ));
     }
     if args.envs == 0 {

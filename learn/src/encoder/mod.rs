@@ -40,7 +40,7 @@ pub const ENCODERS: &[(&str, &str)] = &[
 ];
 
 /// One camera image: row-major, top row first; RGB bytes (3 per pixel) and an optional depth
-/// image (metres, one per pixel; non-finite where nothing was hit).
+/// image (metres, one per pixel; 0 or non-finite where nothing was hit).
 #[derive(Clone, Copy, Debug)]
 pub struct Image<'a> {
     /// Width in pixels.

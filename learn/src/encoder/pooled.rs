@@ -3,7 +3,8 @@
 use super::{Image, ImageEncoder};
 use crate::LearnError;
 
-/// Depth (m) that maps to 1.0; farther, and pixels where nothing was hit, count as 1.0.
+/// Depth (m) that maps to 1.0; farther, and pixels where nothing was hit (0 or not finite),
+/// count as 1.0.
 pub const MAX_DEPTH: f32 = 5.0;
 
 /// Average pooling of an RGB-D image over a `grid` x `grid` cell grid: per cell (row-major,
@@ -46,7 +47,7 @@ impl Pooled {
                         }
                         if let Some(d) = im.depth {
                             let z = d[p];
-                            let z = if z.is_finite() && z >= 0.0 {
+                            let z = if z.is_finite() && z > 0.0 {
                                 z.min(MAX_DEPTH) / MAX_DEPTH
                             } else {
                                 1.0
