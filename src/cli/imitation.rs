@@ -19,14 +19,25 @@ use crate::make::{self, MakeOptions};
 
 /// The demonstrations of every episode of `ds`: the inputs `spec` asks for (image features
 /// first, then `observation.state`) and `action`.
-fn demos(ds: &Dataset, spec: &InputSpec, low: Vec<f32>, high: Vec<f32>) -> Result<Demos, CliError> {
+fn demos(
+    ds: &Dataset,
+    spec: &InputSpec,
+    successful_only: bool,
+    low: Vec<f32>,
+    high: Vec<f32>,
+) -> Result<(Demos, usize), CliError> {
     let mut d = Demos {
         low,
         high,
         ..Demos::default()
     };
     let feature_col = spec.feature_column();
-    for i in 0..ds.episodes.len() {
+    let mut used = 0;
+    for (i, meta) in ds.episodes.iter().enumerate() {
+        if successful_only && meta.success != Some(true) {
+            continue;
+        }
+        used += 1;
         let cols = ds
             .read_episode(i)
             .map_err(|e| CliError::input(e.to_string()))?;
@@ -55,7 +66,14 @@ fn demos(ds: &Dataset, spec: &InputSpec, low: Vec<f32>, high: Vec<f32>) -> Resul
         }
         d.act.extend_from_slice(a);
     }
-    Ok(d)
+    if used == 0 {
+        return Err(CliError::input(format!(
+            "{}: no {}episode to learn from",
+            ds.dir.display(),
+            if successful_only { "successful " } else { "" }
+        )));
+    }
+    Ok((d, used))
 }
 
 /// The behaviour-cloning settings: defaults, `--config FILE` (RON `BcConfig`), each `--set
@@ -128,7 +146,13 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let features: Option<ImageFeatures> =
         serde_json::from_value(ds.extra["features"].clone()).unwrap_or(None);
     let inputs = InputSpec::parse(&args.inputs, features).map_err(CliError::input)?;
-    let demos = demos(&ds, &inputs, act.low.clone(), act.high.clone())?;
+    let (demos, episodes) = demos(
+        &ds,
+        &inputs,
+        args.successful_only,
+        act.low.clone(),
+        act.high.clone(),
+    )?;
     if (inputs.features.is_none() && demos.obs_dim != spaces.observation.flat_dim())
         || demos.act_dim != act.dim
     {
@@ -143,20 +167,13 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     }
     let note = json!({"target": args.target, "actions": actions, "algo": args.algo,
                       "dataset": dir.display().to_string(), "inputs": inputs,
+                      "episodes": episodes, "successful_only": args.successful_only,
                       "command": std::env::args().collect::<Vec<_>>().join(" ")})
     .to_string();
     let policy_dir = args.out.join("policy");
     if args.algo == "retrieval" {
         let what = inputs.describe();
-        return retrieval(
-            args,
-            &demos,
-            &what,
-            &note,
-            &policy_dir,
-            ds.episodes.len(),
-            out,
-        );
+        return retrieval(args, &demos, &what, &note, &policy_dir, episodes, out);
     }
     let cfg = config(args)?;
     let identity = format!(
@@ -173,7 +190,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         cfg.seed,
         demos.len(),
         inputs.describe(),
-        ds.episodes.len(),
+        episodes,
         dir.display(),
         args.out.display()
     )

@@ -24,6 +24,10 @@ pub struct TrainArgs {
     /// `features+state`; the policy renders and encodes its camera when it acts.
     #[arg(long, default_value = "state")]
     pub inputs: String,
+    /// `--algo bc|retrieval`: learn from the dataset's successful episodes only (a noisy
+    /// recording also holds failures).
+    #[arg(long)]
+    pub successful_only: bool,
     /// Seed of the learner and of the env resets (default: the configuration's, 0).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -94,6 +98,11 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     if args.dataset.is_some() {
         return Err(CliError::input(
             "--dataset: only used with --algo bc or retrieval",
+        ));
+    }
+    if args.successful_only {
+        return Err(CliError::input(
+            "--successful-only: only used with --algo bc or retrieval",
         ));
     }
     if args.inputs != "state" {
