@@ -44,6 +44,7 @@ mod imitation;
 pub mod learn;
 mod record;
 mod soak;
+mod teleop;
 
 use crate::episode::{final_success, EpisodeEnd};
 use crate::make::{self, load_plugins, MakeError, MakeOptions};
@@ -219,6 +220,20 @@ pub struct ViewArgs {
     /// Write the state when the viewer closes (modesuite.state.v1 JSON, as `run --dump-state`).
     #[arg(long)]
     pub dump_state: Option<PathBuf>,
+    /// Append each teleoperated episode to this LeRobot dataset when it ends (by the task, a
+    /// reset `r`, or closing the viewer), marked successful or not; needs the discrete keys
+    /// (`--actions "(discrete: true)"`). See `dataset import-teleop`.
+    #[arg(long)]
+    pub record_dataset: Option<PathBuf>,
+    /// With --record-dataset: cameras to record as videos, comma-separated (`robot`).
+    #[arg(long, value_delimiter = ',')]
+    pub cameras: Vec<String>,
+    /// With --record-dataset: image features of the first camera to cache (`pooled`, `dinov2`).
+    #[arg(long)]
+    pub encoder: Option<String>,
+    /// The encoder's weights file.
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
 }
 
 /// A CLI failure: the message and the exit code (2 = bad input, 1 = runtime failure).
@@ -551,7 +566,24 @@ fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
         size,
         paused: args.paused,
     };
-    let (summary, mut env) = modesuite_render::viewer::run_viewer(env, opts).map_err(render_err)?;
+    let hook = match &args.record_dataset {
+        Some(dir) => Some(teleop::dataset_hook(
+            &args.target,
+            dir.clone(),
+            args.actions.clone(),
+            args.cameras.clone(),
+            args.encoder.clone(),
+            args.weights.clone(),
+        )?),
+        None if !args.cameras.is_empty() || args.encoder.is_some() || args.weights.is_some() => {
+            return Err(CliError::input(
+                "--cameras, --encoder, --weights: only with --record-dataset",
+            ))
+        }
+        None => None,
+    };
+    let (summary, mut env) =
+        modesuite_render::viewer::run_viewer_with(env, opts, hook).map_err(render_err)?;
     if let Some(path) = &args.dump_state {
         let length = env
             .app

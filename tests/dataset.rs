@@ -220,3 +220,94 @@ fn a_full_disk_ends_the_recording_with_a_clear_error_and_a_loadable_dataset() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Keyboard demonstrations (`dataset import-teleop`, the path `view --record-dataset` takes for
+/// each ended episode): a recording of the discrete keys becomes a dataset whose actions are
+/// the keys, which re-simulates bit for bit; a recording of a continuous-action env, or one
+/// whose keys are not one per step, is refused.
+#[test]
+fn teleoperation_recordings_import_as_datasets() {
+    let names = [
+        "body_forward",
+        "body_left",
+        "body_right",
+        "body_back",
+        "turn_left",
+        "turn_right",
+        "hand_forward",
+        "hand_back",
+        "hand_left",
+        "hand_right",
+        "hand_up",
+        "hand_down",
+        "grasp",
+        "release",
+    ];
+    // two episodes: 24 keys (mostly forward), then an empty one (the viewer's last, unused)
+    let keys: Vec<usize> = (0..24).map(|j| [0, 0, 0, 10, 6, 4, 0, 12][j % 8]).collect();
+    let actions: Vec<serde_json::Value> = keys
+        .iter()
+        .enumerate()
+        .map(|(j, &k)| serde_json::json!({"step": j, "action": k, "name": names[k]}))
+        .collect();
+    let rec = serde_json::json!({"format": "modesuite.teleop.v1", "scene": "MoDe-Spot-Uncover-v0",
+        "episodes": [{"seed": 5, "actions": actions, "length": 24},
+                     {"seed": 6, "actions": [], "length": 0}]});
+    let dir = scratch("teleop");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("teleop.json");
+    std::fs::write(&file, rec.to_string()).unwrap();
+    let out = dir.join("ds");
+    let (f, o) = (file.to_str().unwrap(), out.to_str().unwrap());
+    let discrete = "(discrete: true)";
+    let line = ok(cli(&[
+        "dataset",
+        "import-teleop",
+        f,
+        "--out",
+        o,
+        "--actions",
+        discrete,
+        "--json",
+    ]));
+    println!("{line}");
+    let v = info(&out);
+    assert_eq!(
+        (v["episodes"].as_u64(), v["frames"].as_u64()),
+        (Some(1), Some(24))
+    );
+    let replay = ok(cli(&["dataset", "replay", o]));
+    println!("{replay}");
+    // the recorded actions are the keys
+    let ds = modesuite_dataset::Dataset::open(&out).unwrap();
+    let cols = ds.read_episode(0).unwrap();
+    let Some((_, modesuite_dataset::Column::F32 { dim: 1, values })) =
+        cols.iter().find(|(n, _)| n == "action")
+    else {
+        panic!("no action column");
+    };
+    let expect: Vec<f32> = keys.iter().map(|&k| k as f32).collect();
+    assert_eq!(values, &expect);
+    // a continuous-action env cannot re-simulate keys
+    let o2 = cli(&["dataset", "import-teleop", f, "--out", &format!("{o}2")]);
+    let err = String::from_utf8_lossy(&o2.stderr);
+    assert_eq!(o2.status.code(), Some(2), "{err}");
+    assert!(err.contains("discrete keys"), "{err}");
+    // keys not one per step (a continuous viewer's recording) are refused
+    let mut bad = rec.clone();
+    bad["episodes"][0]["actions"][3]["step"] = serde_json::json!(9);
+    std::fs::write(&file, bad.to_string()).unwrap();
+    let o3 = cli(&[
+        "dataset",
+        "import-teleop",
+        f,
+        "--out",
+        &format!("{o}3"),
+        "--actions",
+        discrete,
+    ]);
+    let err = String::from_utf8_lossy(&o3.stderr);
+    assert_eq!(o3.status.code(), Some(2), "{err}");
+    assert!(err.contains("key 3"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

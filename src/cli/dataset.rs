@@ -82,6 +82,10 @@ pub enum DatasetCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Appends the episodes of a teleoperation recording (`view --record FILE` with the discrete
+    /// keys) to a dataset, re-simulated from their seeds with their keys (the simulation is
+    /// deterministic, so the dataset holds what the viewer showed).
+    ImportTeleop(super::teleop::ImportArgs),
     /// Re-simulates recorded episodes from their seeds with their actions and checks that every
     /// state, reward and end is reproduced bit for bit; exit 1 otherwise.
     Replay {
@@ -270,23 +274,9 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
             args.noise
         )));
     }
-    let Setup {
-        mut env,
-        mut renderer,
-        cameras,
-        encoder,
-        info,
-        extra,
-        steps,
-    } = setup(args)?;
-    env.autoreset = false;
-    let mut writer = DatasetWriter::open_or_create(&args.out, info, &extra).map_err(dataset_err)?;
-    let act = ActLayout::of(&env.spaces().action).map_err(CliError::input)?;
-    let mut policy = make_run_policy(&args.policy, &env)?;
-    let staging = args.out.join(".recording");
-    let task = instruction(&args.target);
-    let fps = writer.info().fps;
-    let start = writer.info().total_episodes as u64;
+    let mut session = Session::open(args)?;
+    let mut policy = make_run_policy(&args.policy, &session.env)?;
+    let start = session.writer.info().total_episodes as u64;
     if start >= args.episodes && !args.json {
         writeln!(
             out,
@@ -297,6 +287,92 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
     }
     for e in start..args.episodes {
         let seed = args.seed.wrapping_add(e);
+        let line = session.episode(policy.as_mut(), seed, args.noise, session.steps)?;
+        print_episode(&line, args.json, out)?;
+    }
+    session.close();
+    Ok(())
+}
+
+/// One line per recorded episode: JSON (`--json`) or text.
+pub(super) fn print_episode(
+    line: &serde_json::Value,
+    as_json: bool,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    if as_json {
+        return writeln!(out, "{line}").map_err(io);
+    }
+    writeln!(
+        out,
+        "episode {}: seed {}, {} frames, return {:.3}, success {}{}",
+        line["episode"],
+        line["seed"],
+        line["length"],
+        line["return"].as_f64().unwrap_or(f64::NAN),
+        line["success"]
+            .as_bool()
+            .map_or("-".into(), |s| s.to_string()),
+        line["error"]
+            .as_str()
+            .map_or(String::new(), |e| format!(", error: {e}"))
+    )
+    .map_err(io)
+}
+
+/// An open recording: the env with its cameras and encoder, and the dataset it appends to.
+pub(super) struct Session {
+    env: Env,
+    renderer: Option<EnvRenderer>,
+    cameras: Vec<CameraDesc>,
+    encoder: Option<Box<dyn ImageEncoder>>,
+    writer: DatasetWriter,
+    act: ActLayout,
+    staging: PathBuf,
+    task: String,
+    steps: u64,
+}
+
+impl Session {
+    pub(super) fn open(args: &RecordArgs) -> Result<Self, CliError> {
+        let Setup {
+            mut env,
+            renderer,
+            cameras,
+            encoder,
+            info,
+            extra,
+            steps,
+        } = setup(args)?;
+        env.autoreset = false;
+        let writer = DatasetWriter::open_or_create(&args.out, info, &extra).map_err(dataset_err)?;
+        let act = ActLayout::of(&env.spaces().action).map_err(CliError::input)?;
+        Ok(Self {
+            env,
+            renderer,
+            cameras,
+            encoder,
+            writer,
+            act,
+            staging: args.out.join(".recording"),
+            task: instruction(&args.target),
+            steps,
+        })
+    }
+
+    /// Records one episode of `policy` from `seed` (at most `steps` env steps, actions
+    /// perturbed by `noise`) and appends it; returns its line (`episode`, `seed`, `length`,
+    /// `return`, `success`, `error`).
+    pub(super) fn episode(
+        &mut self,
+        policy: &mut dyn modesuite_tasks::expert::Policy,
+        seed: u64,
+        noise: f64,
+        steps: u64,
+    ) -> Result<serde_json::Value, CliError> {
+        let (env, act) = (&mut self.env, &self.act);
+        let e = self.writer.info().total_episodes;
+        let fps = self.writer.info().fps;
         let mut obs = env.reset(Some(seed)).0;
         policy.reset(seed);
         let mut rng = EnvRng::from_seed(seed ^ 0x6e6f_6973_655f_7365);
@@ -304,22 +380,22 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         let (mut states, mut actions, mut rewards, mut dones, mut succ) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut feats: Vec<f32> = Vec::new();
-        std::fs::create_dir_all(&staging)
-            .map_err(|err| CliError::runtime(format!("{}: {err}", staging.display())))?;
+        std::fs::create_dir_all(&self.staging)
+            .map_err(|err| CliError::runtime(format!("{}: {err}", self.staging.display())))?;
         let mut videos: Vec<(PathBuf, VideoWriter, Vec<Vec<u8>>)> = Vec::new();
-        for (k, cam) in cameras.iter().enumerate() {
-            let path = staging.join(format!("episode-{e}-{k}.mp4"));
+        for (k, cam) in self.cameras.iter().enumerate() {
+            let path = self.staging.join(format!("episode-{e}-{k}.mp4"));
             let w = VideoWriter::create(&path, cam.width, cam.height, f64::from(fps))
                 .map_err(render_err)?;
             videos.push((path, w, Vec::new()));
         }
         let (mut success, mut error, mut ret) = (None, None, 0.0);
         for t in 0..steps {
-            if let Some(r) = renderer.as_mut() {
+            if let Some(r) = self.renderer.as_mut() {
                 let frames = r
-                    .render_cameras(&env.app.world, &cameras)
+                    .render_cameras(&env.app.world, &self.cameras)
                     .map_err(render_err)?;
-                if let (Some(enc), Some(frame)) = (&encoder, frames.first()) {
+                if let (Some(enc), Some(frame)) = (&self.encoder, frames.first()) {
                     feats.extend(encode_frame(enc.as_ref(), frame).map_err(CliError::runtime)?);
                 }
                 for (frame, (_, w, sampled)) in frames.iter().zip(videos.iter_mut()) {
@@ -329,11 +405,11 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
                     }
                 }
             }
-            if let Err(err) = policy.act(&env, &mut action) {
+            if let Err(err) = policy.act(env, &mut action) {
                 error = Some(format!("policy: {err}"));
                 break;
             }
-            add_noise(&mut action, &act, args.noise, &mut rng);
+            add_noise(&mut action, act, noise, &mut rng);
             let o = env.step(&action);
             states.extend_from_slice(&obs);
             actions.extend_from_slice(&action);
@@ -367,7 +443,7 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         }
         let len = rewards.len();
         // a step cut short by a policy error rendered a frame it did not record
-        feats.truncate(len * encoder.as_ref().map_or(0, |e| e.dim()));
+        feats.truncate(len * self.encoder.as_ref().map_or(0, |e| e.dim()));
         let mut columns = vec![
             (
                 "observation.state".into(),
@@ -393,7 +469,7 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
             ("next.done".into(), Column::Bool(dones)),
             ("next.success".into(), Column::Bool(succ)),
         ];
-        if let Some(enc) = &encoder {
+        if let Some(enc) = &self.encoder {
             columns.push((
                 format!("observation.features.{}", enc.name()),
                 Column::F32 {
@@ -403,29 +479,28 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
             ));
         }
         let input = EpisodeInput {
-            task: task.clone(),
+            task: self.task.clone(),
             columns,
             videos: video_inputs,
             seed,
             success,
         };
-        let index = writer.append(input).map_err(dataset_err)?;
-        let line = json!({"episode": index, "seed": seed, "length": len, "return": ret,
-                          "success": success, "error": error});
-        if args.json {
-            writeln!(out, "{line}").map_err(io)?;
-        } else {
-            writeln!(
-                out,
-                "episode {index}: seed {seed}, {len} frames, return {ret:.3}, success {}{}",
-                success.map_or("-".into(), |s| s.to_string()),
-                error.map_or(String::new(), |e| format!(", error: {e}"))
-            )
-            .map_err(io)?;
-        }
+        let index = self.writer.append(input).map_err(dataset_err)?;
+        Ok(
+            json!({"episode": index, "seed": seed, "length": len, "return": ret,
+                  "success": success, "error": error}),
+        )
     }
-    let _ = std::fs::remove_dir_all(&staging);
-    Ok(())
+
+    /// The env episodes are recorded in.
+    pub(super) fn env(&self) -> &Env {
+        &self.env
+    }
+
+    /// Removes the staging folder of the videos.
+    pub(super) fn close(self) {
+        let _ = std::fs::remove_dir_all(&self.staging);
+    }
 }
 
 /// `modesuite dataset ...`.
@@ -433,6 +508,7 @@ pub fn dataset(cmd: &DatasetCommand, out: &mut dyn Write) -> Result<(), CliError
     match cmd {
         DatasetCommand::Info { dir, json } => info(dir, *json, out),
         DatasetCommand::Replay { dir, episode, json } => replay(dir, *episode, *json, out),
+        DatasetCommand::ImportTeleop(args) => super::teleop::import(args, out),
     }
 }
 

@@ -120,11 +120,42 @@ struct Viewer {
     drag: Option<(f64, f64)>,
     cursor: (f64, f64),
     summary: ViewerSummary,
+    on_episode: Option<EpisodeHook>,
+}
+
+/// Called with each teleoperated episode that ended (by the env, by a reset, or by closing the
+/// viewer) and has at least one key; an error is printed and the viewer goes on.
+pub type EpisodeHook = Box<dyn FnMut(&crate::teleop::RecordedEpisode) -> Result<(), String>>;
+
+impl Viewer {
+    /// Hands the current episode to the hook, if it has keys.
+    fn episode_ended(&mut self) {
+        let (Some(hook), Some(ep)) = (self.on_episode.as_mut(), self.recording.episodes.last())
+        else {
+            return;
+        };
+        if ep.actions.is_empty() {
+            return;
+        }
+        if let Err(e) = hook(ep) {
+            eprintln!("modesuite view: episode of seed {} not saved: {e}", ep.seed);
+        }
+    }
 }
 
 /// Opens a window on `env` (its scene spawned) and runs until the window closes or `esc`;
 /// returns what happened and the env in its final state.
-pub fn run_viewer(mut env: Env, opts: ViewerOptions) -> Result<(ViewerSummary, Env), RenderError> {
+pub fn run_viewer(env: Env, opts: ViewerOptions) -> Result<(ViewerSummary, Env), RenderError> {
+    run_viewer_with(env, opts, None)
+}
+
+/// [`run_viewer`], handing each teleoperated episode to `on_episode` when it ends (`view
+/// --record-dataset` appends it to a dataset).
+pub fn run_viewer_with(
+    mut env: Env,
+    opts: ViewerOptions,
+    on_episode: Option<EpisodeHook>,
+) -> Result<(ViewerSummary, Env), RenderError> {
     if env.app.scene().is_none() {
         return Err(RenderError::Device(
             "view: the env has no spawned scene".into(),
@@ -173,10 +204,12 @@ pub fn run_viewer(mut env: Env, opts: ViewerOptions) -> Result<(ViewerSummary, E
         drag: None,
         cursor: (0.0, 0.0),
         summary: ViewerSummary::default(),
+        on_episode,
     };
     event_loop
         .run_app(&mut viewer)
         .map_err(|e| RenderError::Device(format!("window event loop: {e}")))?;
+    viewer.episode_ended();
     if let Some(path) = &viewer.opts.record {
         viewer.recording.save(path)?;
     }
@@ -417,6 +450,7 @@ impl Viewer {
         self.sim_clock = now;
         if self.reset {
             self.reset = false;
+            self.episode_ended();
             self.seed = self.seed.wrapping_add(1);
             self.env.reset(Some(self.seed));
             self.recording.start_episode(self.seed);
