@@ -223,8 +223,9 @@ fn a_full_disk_ends_the_recording_with_a_clear_error_and_a_loadable_dataset() {
 
 /// Keyboard demonstrations (`dataset import-teleop`, the path `view --record-dataset` takes for
 /// each ended episode): a recording of the discrete keys becomes a dataset whose actions are
-/// the keys, which re-simulates bit for bit; a recording of a continuous-action env, or one
-/// whose keys are not one per step, is refused.
+/// the keys, which re-simulates bit for bit; behaviour cloning with the classification head
+/// learns it and presses the same keys from its seed; a recording of a continuous-action env,
+/// or one whose keys are not one per step, is refused.
 #[test]
 fn teleoperation_recordings_import_as_datasets() {
     let names = [
@@ -288,6 +289,52 @@ fn teleoperation_recordings_import_as_datasets() {
     };
     let expect: Vec<f32> = keys.iter().map(|&k| k as f32).collect();
     assert_eq!(values, &expect);
+    // behaviour cloning of the keys (the classification head) replays the demonstration
+    let bc = dir.join("bc");
+    let trained = ok(cli(&[
+        "train",
+        "MoDe-Spot-Uncover-v0",
+        "--algo",
+        "bc",
+        "--dataset",
+        o,
+        "--actions",
+        discrete,
+        "--out",
+        bc.to_str().unwrap(),
+        "--set",
+        "epochs=300",
+    ]));
+    println!("{trained}");
+    // recorded from the demonstration's seed, the BC policy presses the same 24 keys
+    let again = dir.join("again");
+    ok(cli(&[
+        "record",
+        "MoDe-Spot-Uncover-v0",
+        "--policy",
+        bc.to_str().unwrap(),
+        "--episodes",
+        "1",
+        "--seed",
+        "5",
+        "--steps",
+        "24",
+        "--out",
+        again.to_str().unwrap(),
+    ]));
+    let ds2 = modesuite_dataset::Dataset::open(&again).unwrap();
+    let cols2 = ds2.read_episode(0).unwrap();
+    let Some((
+        _,
+        modesuite_dataset::Column::F32 {
+            values: pressed, ..
+        },
+    )) = cols2.iter().find(|(n, _)| n == "action")
+    else {
+        panic!("no action column");
+    };
+    println!("keys pressed by BC from seed 5: {pressed:?}");
+    assert_eq!(pressed, &expect);
     // a continuous-action env cannot re-simulate keys
     let o2 = cli(&["dataset", "import-teleop", f, "--out", &format!("{o}2")]);
     let err = String::from_utf8_lossy(&o2.stderr);

@@ -4,13 +4,17 @@
 //! `Policy::load`, `modesuite eval` and `run --policy` use it unchanged.
 //!
 //! Observations are normalised by the demonstrations' mean and variance (kept in the policy
-//! file); actions are regressed in the `[-1, 1]` units of the squashed head. Training is
-//! minibatch Adam over shuffled epochs, deterministic for a seed.
+//! file); actions are regressed in the `[-1, 1]` units of the squashed head. Discrete keys
+//! (`Demos::discrete`, the viewer's 14 teleoperation keys) are learned by a classification
+//! head instead: the mean head gives one logit per key, trained by cross-entropy, and the
+//! policy acts with the arg-max. Training is minibatch Adam over shuffled epochs,
+//! deterministic for a seed.
 
 use std::path::Path;
 
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::activation::log_softmax;
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
@@ -98,6 +102,9 @@ pub struct Demos {
     pub low: Vec<f32>,
     /// Upper action bounds (finite).
     pub high: Vec<f32>,
+    /// `Some(n)`: each action is one key index in `0..n` (`act_dim` 1), learned by a
+    /// classification head; `None`: continuous actions.
+    pub discrete: Option<usize>,
 }
 
 impl Demos {
@@ -117,7 +124,8 @@ impl Demos {
 pub struct BcSummary {
     /// Samples trained on.
     pub samples: usize,
-    /// Mean squared error of the last epoch (in the squashed units).
+    /// Loss of the last epoch: mean squared error in the squashed units, or the cross-entropy
+    /// of discrete keys.
     pub final_loss: f64,
     /// Gradient steps taken.
     pub steps: u64,
@@ -169,6 +177,21 @@ pub fn train_bc(
             "action bounds: one low and high per action value".into(),
         ));
     }
+    if let Some(k) = demos.discrete {
+        let bad = demos
+            .act
+            .iter()
+            .position(|a| !(a.fract() == 0.0 && *a >= 0.0 && (*a as usize) < k));
+        if ad != 1 || k < 2 || bad.is_some() {
+            return Err(LearnError::Config(format!(
+                "discrete demonstrations: one key index in 0..{k} per sample (act_dim {ad}{})",
+                bad.map_or(String::new(), |i| format!(
+                    ", sample {i} has {}",
+                    demos.act[i]
+                ))
+            )));
+        }
+    }
     let norm = normaliser(demos, cfg.obs_clip);
     let obs: Vec<f32> = demos
         .obs
@@ -180,21 +203,29 @@ pub fn train_bc(
             })
         })
         .collect();
-    // targets in the squashed head's units, kept off +-1 where tanh has no preimage
-    let target: Vec<f32> = demos
-        .act
-        .iter()
-        .enumerate()
-        .map(|(i, a)| {
-            let (l, h) = (demos.low[i % ad], demos.high[i % ad]);
-            let u = if h > l {
-                2.0 * (a - l) / (h - l) - 1.0
-            } else {
-                0.0
-            };
-            u.clamp(-0.999, 0.999)
-        })
-        .collect();
+    // targets: one-hot keys, or the squashed head's units kept off +-1 (no tanh preimage)
+    let outputs = demos.discrete.unwrap_or(ad);
+    let target: Vec<f32> = match demos.discrete {
+        Some(k) => demos
+            .act
+            .iter()
+            .flat_map(|a| (0..k).map(move |j| if j == *a as usize { 1.0 } else { 0.0 }))
+            .collect(),
+        None => demos
+            .act
+            .iter()
+            .enumerate()
+            .map(|(i, a)| {
+                let (l, h) = (demos.low[i % ad], demos.high[i % ad]);
+                let u = if h > l {
+                    2.0 * (a - l) / (h - l) - 1.0
+                } else {
+                    0.0
+                };
+                u.clamp(-0.999, 0.999)
+            })
+            .collect(),
+    };
     let device = Device::flex().autodiff();
     let mut rng = Rng::new(cfg.seed);
     let sac = SacConfig {
@@ -202,7 +233,7 @@ pub fn train_bc(
         activation: cfg.activation,
         ..SacConfig::default()
     };
-    let mut actor = SacActor::new(&mut rng, od, ad, &sac, &device);
+    let mut actor = SacActor::new(&mut rng, od, outputs, &sac, &device);
     let mut opt = AdamConfig::new().with_epsilon(1e-8).init();
     let mut order: Vec<usize> = (0..n).collect();
     let (mut final_loss, mut steps) = (0.0, 0u64);
@@ -213,13 +244,20 @@ pub fn train_bc(
         for chunk in order.chunks(b) {
             let rows = chunk.len();
             let mut x = Vec::with_capacity(rows * od);
-            let mut y = Vec::with_capacity(rows * ad);
+            let mut y = Vec::with_capacity(rows * outputs);
             for &i in chunk {
                 x.extend_from_slice(&obs[i * od..(i + 1) * od]);
-                y.extend_from_slice(&target[i * ad..(i + 1) * ad]);
+                y.extend_from_slice(&target[i * outputs..(i + 1) * outputs]);
             }
-            let pred = actor.mean_action(tensor2(&x, rows, od, &device));
-            let loss = (pred - tensor2(&y, rows, ad, &device)).square().mean();
+            let x = tensor2(&x, rows, od, &device);
+            let y = tensor2(&y, rows, outputs, &device);
+            let loss = if demos.discrete.is_some() {
+                // cross-entropy of the logits against the one-hot keys
+                let logp = log_softmax(actor.forward(x).0, 1);
+                -(logp * y).sum_dim(1).mean()
+            } else {
+                (actor.mean_action(x) - y).square().mean()
+            };
             let grads = GradientsParams::from_grads(loss.backward(), &actor);
             actor = opt.step(cfg.learning_rate, actor, grads);
             let l = f64::from(scalar(loss));
@@ -252,6 +290,7 @@ pub fn train_bc(
         config_ron: ron::ser::to_string_pretty(cfg, ron::ser::PrettyConfig::default())
             .map_err(|e| LearnError::Config(e.to_string()))?,
         note: note.to_string(),
+        discrete: demos.discrete,
     };
     std::fs::create_dir_all(out).map_err(|e| LearnError::Io(format!("{}: {e}", out.display())))?;
     policy::write(out, &meta, record_bytes(actor.valid())?)?;
@@ -260,4 +299,67 @@ pub fn train_bc(
         final_loss,
         steps,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::policy::Policy;
+
+    /// Three keys by the sign pattern of a 2-d observation: the classification head learns
+    /// them exactly, the saved policy acts with the arg-max, and bad keys are refused.
+    #[test]
+    fn discrete_keys_are_learned_by_a_classification_head() {
+        let mut obs = Vec::new();
+        let mut act = Vec::new();
+        let key = |x: f32, y: f32| -> f32 {
+            if x < -0.3 {
+                0.0
+            } else if y > 0.0 {
+                1.0
+            } else {
+                2.0
+            }
+        };
+        for i in 0..200 {
+            let (x, y) = (
+                ((i * 37) % 200) as f32 / 100.0 - 1.0,
+                ((i * 71) % 200) as f32 / 100.0 - 1.0,
+            );
+            obs.extend([x, y]);
+            act.push(key(x, y));
+        }
+        let demos = Demos {
+            obs: obs.clone(),
+            act: act.clone(),
+            obs_dim: 2,
+            act_dim: 1,
+            low: vec![0.0],
+            high: vec![2.0],
+            discrete: Some(3),
+        };
+        let cfg = BcConfig {
+            hidden: vec![64, 64],
+            epochs: 400,
+            batch_size: 50,
+            ..BcConfig::default()
+        };
+        let dir =
+            std::env::temp_dir().join(format!("modesuite-bc-discrete-{}", std::process::id()));
+        let s = train_bc(&demos, &cfg, "keys", "{}", &dir, |_, _| {}).unwrap();
+        let p = Policy::load(&dir).unwrap();
+        assert_eq!((p.meta().discrete, p.act_dim()), (Some(3), 1));
+        let got = p.act(&obs);
+        let right = got.iter().zip(&act).filter(|(a, b)| a == b).count();
+        println!(
+            "discrete BC: cross-entropy {:.4}, {right}/200 keys right (tolerance: all)",
+            s.final_loss
+        );
+        assert_eq!(right, 200);
+        let mut bad = demos.clone();
+        bad.act[7] = 3.0;
+        let e = train_bc(&bad, &cfg, "keys", "{}", &dir, |_, _| {}).unwrap_err();
+        assert!(e.to_string().contains("sample 7 has 3"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

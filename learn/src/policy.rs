@@ -67,6 +67,10 @@ pub struct PolicyMeta {
     pub config_ron: String,
     /// Free text from the run (the command that made it, say).
     pub note: String,
+    /// `Some(n)`: the action is one of `n` discrete keys (`act_dim` 1, the key index), chosen
+    /// as the arg-max of the network's `n` logits (behaviour cloning's classification head).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discrete: Option<usize>,
 }
 
 enum Net {
@@ -126,6 +130,7 @@ pub(crate) fn export_ppo(
         env_steps,
         config_ron: crate::config::AlgoConfig::Ppo(cfg.clone()).to_ron(),
         note: note.to_string(),
+        discrete: None,
     };
     write(dir, &meta, record_bytes(model.valid())?)
 }
@@ -158,6 +163,7 @@ pub(crate) fn export_sac(
         env_steps,
         config_ron: crate::config::AlgoConfig::Sac(cfg.clone()).to_ron(),
         note: note.to_string(),
+        discrete: None,
     };
     write(dir, &meta, record_bytes(actor.valid())?)
 }
@@ -168,6 +174,11 @@ const MAX_DIM: usize = 1 << 20;
 const MAX_PARAMETERS: usize = 1 << 27;
 
 impl PolicyMeta {
+    /// Outputs of the network: the logits of a discrete policy, else the action values.
+    pub fn net_outputs(&self) -> usize {
+        self.discrete.unwrap_or(self.act_dim)
+    }
+
     /// Checks sizes, bounds and normaliser statistics: the message names the field.
     pub fn check(&self) -> Result<(), String> {
         if !(1..=MAX_DIM).contains(&self.obs_dim) || !(1..=MAX_DIM).contains(&self.act_dim) {
@@ -185,9 +196,17 @@ impl PolicyMeta {
                 self.hidden
             ));
         }
+        if let Some(n) = self.discrete {
+            if !(2..=MAX_DIM).contains(&n) || self.act_dim != 1 || self.algo != "bc" {
+                return Err(format!(
+                    "discrete = {n} (algo {}, act_dim {}): 2..={MAX_DIM} keys of a bc policy with act_dim 1",
+                    self.algo, self.act_dim
+                ));
+            }
+        }
         let mut params = 0usize;
         let mut width = self.obs_dim;
-        for &h in self.hidden.iter().chain([&self.act_dim]) {
+        for &h in self.hidden.iter().chain([&self.net_outputs()]) {
             params = params.saturating_add(width.saturating_mul(h).saturating_add(h));
             width = h;
         }
@@ -281,7 +300,7 @@ impl Policy {
                     activation: meta.activation,
                     ..SacConfig::default()
                 };
-                let m = SacActor::new(&mut rng, meta.obs_dim, meta.act_dim, &cfg, &device);
+                let m = SacActor::new(&mut rng, meta.obs_dim, meta.net_outputs(), &cfg, &device);
                 Net::Sac(load_record(m, &weights)?)
             }
             other => {
@@ -340,6 +359,21 @@ impl Policy {
             }
         }
         let x = tensor2(&o, rows, od, &self.device);
+        if let (Some(n), Net::Sac(m)) = (self.meta.discrete, &self.net) {
+            // the first of the largest logits
+            return to_vec(m.forward(x).0)
+                .chunks_exact(n)
+                .map(|l| {
+                    let mut best = 0;
+                    for (k, v) in l.iter().enumerate() {
+                        if *v > l[best] {
+                            best = k;
+                        }
+                    }
+                    best as f32
+                })
+                .collect();
+        }
         let a = match &self.net {
             Net::Ppo(m) => to_vec(m.mean(x)),
             Net::Sac(m) => to_vec(m.mean_action(x)),

@@ -138,21 +138,18 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     )?;
     let spaces = env.spaces();
     let act = ActLayout::of(&spaces.action).map_err(CliError::input)?;
-    if act.discrete.is_some() {
-        return Err(CliError::input(
-            "behaviour cloning of discrete actions (a classification head) is not implemented",
-        ));
-    }
     let features: Option<ImageFeatures> =
         serde_json::from_value(ds.extra["features"].clone()).unwrap_or(None);
     let inputs = InputSpec::parse(&args.inputs, features).map_err(CliError::input)?;
-    let (demos, episodes) = demos(
+    let (mut demos, episodes) = demos(
         &ds,
         &inputs,
         args.successful_only,
         act.low.clone(),
         act.high.clone(),
     )?;
+    // discrete keys (keyboard demonstrations): BC's classification head
+    demos.discrete = act.discrete.map(|n| n as usize);
     if (inputs.features.is_none() && demos.obs_dim != spaces.observation.flat_dim())
         || demos.act_dim != act.dim
     {
@@ -257,6 +254,11 @@ fn retrieval(
                 )))
             }
         }
+    }
+    if demos.discrete.is_some() && k > 1 {
+        return Err(CliError::input(format!(
+            "--set k={k}: discrete keys are not averaged; k = 1 replays the nearest frame's key"
+        )));
     }
     let r =
         crate::retrieval::Retrieval::new(&demos.obs, &demos.act, demos.obs_dim, demos.act_dim, k);
