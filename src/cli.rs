@@ -225,15 +225,9 @@ pub struct ViewArgs {
     /// (`--actions "(discrete: true)"`). See `dataset import-teleop`.
     #[arg(long)]
     pub record_dataset: Option<PathBuf>,
-    /// With --record-dataset: cameras to record as videos, comma-separated (`robot`).
-    #[arg(long, value_delimiter = ',')]
-    pub cameras: Vec<String>,
-    /// With --record-dataset: image features of the first camera to cache (`pooled`, `dinov2`).
-    #[arg(long)]
-    pub encoder: Option<String>,
-    /// The encoder's weights file.
-    #[arg(long)]
-    pub weights: Option<PathBuf>,
+    /// With --record-dataset: cameras and image features to record.
+    #[command(flatten)]
+    pub capture: dataset::CaptureArgs,
 }
 
 /// A CLI failure: the message and the exit code (2 = bad input, 1 = runtime failure).
@@ -571,11 +565,9 @@ fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
             &args.target,
             dir.clone(),
             args.actions.clone(),
-            args.cameras.clone(),
-            args.encoder.clone(),
-            args.weights.clone(),
+            &args.capture,
         )?),
-        None if !args.cameras.is_empty() || args.encoder.is_some() || args.weights.is_some() => {
+        None if args.capture.any() => {
             return Err(CliError::input(
                 "--cameras, --encoder, --weights: only with --record-dataset",
             ))

@@ -44,18 +44,9 @@ pub struct RecordArgs {
     /// executed, so the expert's recoveries are in the data.
     #[arg(long, default_value_t = 0.0)]
     pub noise: f64,
-    /// Cameras of the scene's render section to record as videos (`robot`: the robot camera),
-    /// comma-separated; MP4 through ffmpeg.
-    #[arg(long, value_delimiter = ',')]
-    pub cameras: Vec<String>,
-    /// Caches image features of the first of `--cameras` per frame as
-    /// `observation.features.<ENCODER>` (for `train --inputs features`): `pooled` (weights-free)
-    /// or `dinov2` (needs --weights).
-    #[arg(long)]
-    pub encoder: Option<String>,
-    /// The encoder's weights file (`dinov2`: DINOv2 ViT-S/14 as safetensors).
-    #[arg(long)]
-    pub weights: Option<PathBuf>,
+    /// Cameras and image features to record.
+    #[command(flatten)]
+    pub capture: CaptureArgs,
     /// The dataset folder.
     #[arg(long)]
     pub out: PathBuf,
@@ -69,6 +60,31 @@ pub struct RecordArgs {
     /// One JSON object per recorded episode.
     #[arg(long)]
     pub json: bool,
+}
+
+/// What a recording captures besides state and actions (`record`, `view --record-dataset`,
+/// `dataset import-teleop`).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct CaptureArgs {
+    /// Cameras of the scene's render section to record as videos (`robot`: the robot camera),
+    /// comma-separated; MP4 through ffmpeg.
+    #[arg(long, value_delimiter = ',')]
+    pub cameras: Vec<String>,
+    /// Caches image features of the first of `--cameras` per frame as
+    /// `observation.features.<ENCODER>` (for `train --inputs features`): `pooled` (weights-free)
+    /// or `dinov2` (needs --weights).
+    #[arg(long)]
+    pub encoder: Option<String>,
+    /// The encoder's weights file (`dinov2`: DINOv2 ViT-S/14 as safetensors).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+}
+
+impl CaptureArgs {
+    /// Whether any capture option is given.
+    pub fn any(&self) -> bool {
+        !self.cameras.is_empty() || self.encoder.is_some() || self.weights.is_some()
+    }
 }
 
 /// `dataset` subcommands.
@@ -121,18 +137,17 @@ fn dataset_err(e: modesuite_dataset::DatasetError) -> CliError {
     CliError::runtime(e.to_string())
 }
 
-/// The env and what a dataset of it looks like.
+/// The env with its cameras and encoder.
 struct Setup {
     env: Env,
     renderer: Option<EnvRenderer>,
     cameras: Vec<CameraDesc>,
     encoder: Option<Box<dyn ImageEncoder>>,
-    info: Info,
-    extra: serde_json::Value,
     steps: u64,
 }
 
-fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
+/// The env and what a dataset of it looks like (its info and `modesuite.json`).
+fn setup(args: &RecordArgs) -> Result<(Setup, Info, serde_json::Value), CliError> {
     let mut actions = args.actions.clone();
     if actions.is_none() && crate::learning::policy_dir(Path::new(&args.policy)).is_some() {
         let origin =
@@ -173,14 +188,14 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
         ("next.done".to_string(), Feature::scalar("bool")),
         ("next.success".to_string(), Feature::scalar("bool")),
     ];
-    let renderer = if args.cameras.is_empty() {
+    let renderer = if args.capture.cameras.is_empty() {
         None
     } else {
         Some(EnvRenderer::for_scene(model.clone()).map_err(render_err)?)
     };
     let mut cameras = Vec::new();
     if let Some(r) = &renderer {
-        for name in &args.cameras {
+        for name in &args.capture.cameras {
             let cam = r.scene_camera(name).map_err(render_err)?.clone();
             features.push((
                 format!("observation.images.{name}"),
@@ -190,12 +205,12 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
         }
     }
     let mut image_features = None;
-    let encoder = match &args.encoder {
+    let encoder = match &args.capture.encoder {
         Some(name) => {
-            let camera = args.cameras.first().ok_or_else(|| {
+            let camera = args.capture.cameras.first().ok_or_else(|| {
                 CliError::input("--encoder: needs a camera to encode (--cameras robot)")
             })?;
-            let enc = super::encode::make_encoder(name, args.weights.as_deref())?;
+            let enc = super::encode::make_encoder(name, args.capture.weights.as_deref())?;
             let mut f = Feature::f32(&[]);
             f.shape = vec![enc.dim()];
             f.names = serde_json::Value::Null;
@@ -204,13 +219,14 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
                 encoder: name.clone(),
                 camera: camera.clone(),
                 weights: args
+                    .capture
                     .weights
                     .as_ref()
                     .map(|w| w.canonicalize().unwrap_or(w.clone())),
             });
             Some(enc)
         }
-        None if args.weights.is_some() => {
+        None if args.capture.weights.is_some() => {
             return Err(CliError::input("--weights: only with --encoder"))
         }
         None => None,
@@ -227,21 +243,20 @@ fn setup(args: &RecordArgs) -> Result<Setup, CliError> {
         "policy": args.policy,
         "noise": args.noise,
         "seed": args.seed,
-        "cameras": args.cameras,
+        "cameras": args.capture.cameras,
         "features": image_features,
         "step_dt": step_dt,
         "modesuite_version": env!("CARGO_PKG_VERSION"),
     });
     let steps = args.steps.or(model.episode_steps).unwrap_or(600);
-    Ok(Setup {
+    let setup = Setup {
         env,
         renderer,
         cameras,
         encoder,
-        info,
-        extra,
         steps,
-    })
+    };
+    Ok((setup, info, extra))
 }
 
 fn add_noise(action: &mut [f32], act: &ActLayout, noise: f64, rng: &mut EnvRng) {
@@ -275,7 +290,7 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         )));
     }
     let mut session = Session::open(args)?;
-    let mut policy = make_run_policy(&args.policy, &session.env)?;
+    let mut policy = make_run_policy(&args.policy, session.env())?;
     let start = session.writer.info().total_episodes as u64;
     if start >= args.episodes && !args.json {
         writeln!(
@@ -287,7 +302,8 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
     }
     for e in start..args.episodes {
         let seed = args.seed.wrapping_add(e);
-        let line = session.episode(policy.as_mut(), seed, args.noise, session.steps)?;
+        let steps = session.setup.steps;
+        let line = session.episode(policy.as_mut(), seed, args.noise, steps)?;
         print_episode(&line, args.json, out)?;
     }
     session.close();
@@ -322,41 +338,25 @@ pub(super) fn print_episode(
 
 /// An open recording: the env with its cameras and encoder, and the dataset it appends to.
 pub(super) struct Session {
-    env: Env,
-    renderer: Option<EnvRenderer>,
-    cameras: Vec<CameraDesc>,
-    encoder: Option<Box<dyn ImageEncoder>>,
+    setup: Setup,
     writer: DatasetWriter,
     act: ActLayout,
     staging: PathBuf,
     task: String,
-    steps: u64,
 }
 
 impl Session {
     pub(super) fn open(args: &RecordArgs) -> Result<Self, CliError> {
-        let Setup {
-            mut env,
-            renderer,
-            cameras,
-            encoder,
-            info,
-            extra,
-            steps,
-        } = setup(args)?;
-        env.autoreset = false;
+        let (mut setup, info, extra) = setup(args)?;
+        setup.env.autoreset = false;
         let writer = DatasetWriter::open_or_create(&args.out, info, &extra).map_err(dataset_err)?;
-        let act = ActLayout::of(&env.spaces().action).map_err(CliError::input)?;
+        let act = ActLayout::of(&setup.env.spaces().action).map_err(CliError::input)?;
         Ok(Self {
-            env,
-            renderer,
-            cameras,
-            encoder,
+            setup,
             writer,
             act,
             staging: args.out.join(".recording"),
             task: instruction(&args.target),
-            steps,
         })
     }
 
@@ -370,7 +370,8 @@ impl Session {
         noise: f64,
         steps: u64,
     ) -> Result<serde_json::Value, CliError> {
-        let (env, act) = (&mut self.env, &self.act);
+        let (s, act) = (&mut self.setup, &self.act);
+        let env = &mut s.env;
         let e = self.writer.info().total_episodes;
         let fps = self.writer.info().fps;
         let mut obs = env.reset(Some(seed)).0;
@@ -383,7 +384,7 @@ impl Session {
         std::fs::create_dir_all(&self.staging)
             .map_err(|err| CliError::runtime(format!("{}: {err}", self.staging.display())))?;
         let mut videos: Vec<(PathBuf, VideoWriter, Vec<Vec<u8>>)> = Vec::new();
-        for (k, cam) in self.cameras.iter().enumerate() {
+        for (k, cam) in s.cameras.iter().enumerate() {
             let path = self.staging.join(format!("episode-{e}-{k}.mp4"));
             let w = VideoWriter::create(&path, cam.width, cam.height, f64::from(fps))
                 .map_err(render_err)?;
@@ -391,11 +392,11 @@ impl Session {
         }
         let (mut success, mut error, mut ret) = (None, None, 0.0);
         for t in 0..steps {
-            if let Some(r) = self.renderer.as_mut() {
+            if let Some(r) = s.renderer.as_mut() {
                 let frames = r
-                    .render_cameras(&env.app.world, &self.cameras)
+                    .render_cameras(&env.app.world, &s.cameras)
                     .map_err(render_err)?;
-                if let (Some(enc), Some(frame)) = (&self.encoder, frames.first()) {
+                if let (Some(enc), Some(frame)) = (&s.encoder, frames.first()) {
                     feats.extend(encode_frame(enc.as_ref(), frame).map_err(CliError::runtime)?);
                 }
                 for (frame, (_, w, sampled)) in frames.iter().zip(videos.iter_mut()) {
@@ -443,7 +444,7 @@ impl Session {
         }
         let len = rewards.len();
         // a step cut short by a policy error rendered a frame it did not record
-        feats.truncate(len * self.encoder.as_ref().map_or(0, |e| e.dim()));
+        feats.truncate(len * s.encoder.as_ref().map_or(0, |e| e.dim()));
         let mut columns = vec![
             (
                 "observation.state".into(),
@@ -469,7 +470,7 @@ impl Session {
             ("next.done".into(), Column::Bool(dones)),
             ("next.success".into(), Column::Bool(succ)),
         ];
-        if let Some(enc) = &self.encoder {
+        if let Some(enc) = &s.encoder {
             columns.push((
                 format!("observation.features.{}", enc.name()),
                 Column::F32 {
@@ -494,7 +495,7 @@ impl Session {
 
     /// The env episodes are recorded in.
     pub(super) fn env(&self) -> &Env {
-        &self.env
+        &self.setup.env
     }
 
     /// Removes the staging folder of the videos.

@@ -14,7 +14,7 @@ use clap::Args;
 use modesuite_engine::prelude::*;
 use modesuite_render::teleop::{RecordedEpisode, Recording};
 
-use super::dataset::{print_episode, RecordArgs, Session};
+use super::dataset::{print_episode, CaptureArgs, RecordArgs, Session};
 use super::CliError;
 
 /// Arguments of `dataset import-teleop`.
@@ -28,15 +28,9 @@ pub struct ImportArgs {
     /// The action modes the viewer ran with (`view --actions`); they must give the discrete keys.
     #[arg(long)]
     pub actions: Option<String>,
-    /// Cameras to record as videos, comma-separated (`robot`).
-    #[arg(long, value_delimiter = ',')]
-    pub cameras: Vec<String>,
-    /// Image features of the first camera to cache (`pooled`, `dinov2`).
-    #[arg(long)]
-    pub encoder: Option<String>,
-    /// The encoder's weights file.
-    #[arg(long)]
-    pub weights: Option<PathBuf>,
+    /// Cameras and image features to record.
+    #[command(flatten)]
+    pub capture: CaptureArgs,
     /// One JSON object per episode.
     #[arg(long)]
     pub json: bool,
@@ -78,9 +72,7 @@ pub(super) fn session(
     target: &str,
     out: PathBuf,
     actions: Option<String>,
-    cameras: Vec<String>,
-    encoder: Option<String>,
-    weights: Option<PathBuf>,
+    capture: &CaptureArgs,
 ) -> Result<Session, CliError> {
     let args = RecordArgs {
         target: target.to_string(),
@@ -88,9 +80,7 @@ pub(super) fn session(
         episodes: 0,
         seed: 0,
         noise: 0.0,
-        cameras,
-        encoder,
-        weights,
+        capture: capture.clone(),
         out,
         actions,
         steps: None,
@@ -126,9 +116,7 @@ pub fn import(args: &ImportArgs, out: &mut dyn Write) -> Result<(), CliError> {
         &rec.scene,
         args.out.clone(),
         args.actions.clone(),
-        args.cameras.clone(),
-        args.encoder.clone(),
-        args.weights.clone(),
+        &args.capture,
     )?;
     for ep in &rec.episodes {
         if let Some(line) = append(&mut s, ep)? {
@@ -145,11 +133,9 @@ pub(super) fn dataset_hook(
     target: &str,
     out: PathBuf,
     actions: Option<String>,
-    cameras: Vec<String>,
-    encoder: Option<String>,
-    weights: Option<PathBuf>,
+    capture: &CaptureArgs,
 ) -> Result<modesuite_render::viewer::EpisodeHook, CliError> {
-    let mut s = session(target, out.clone(), actions, cameras, encoder, weights)?;
+    let mut s = session(target, out.clone(), actions, capture)?;
     Ok(Box::new(move |ep: &RecordedEpisode| {
         if let Some(line) = append(&mut s, ep).map_err(|e| e.message)? {
             eprintln!("{}: appended {line}", out.display());
