@@ -193,3 +193,4 @@ pub fn app_from_ron(text: &str) -> SimApp {
     app.spawn_scene(model).unwrap();
     app
 }
+pub mod tasks;
