@@ -327,3 +327,39 @@ fn run_json_says_how_each_episode_ended() {
     assert_eq!(timed_out["terminations"], serde_json::json!([]));
     assert_eq!(timed_out["length"], 4);
 }
+
+/// A panic of third-party code that modesuite catches (parry's convex decomposition of an
+/// open mesh, found by the fuzzer) is reported as the located error alone, without the panic
+/// message the default hook would print before it; `MODESUITE_LOUD_PANICS` prints it.
+#[test]
+fn a_caught_third_party_panic_prints_only_the_error() {
+    let dir = tmp("open-mesh");
+    let _ = std::fs::create_dir_all(&dir);
+    std::fs::write(
+        dir.join("fuzz-open.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 1 0\nvt 0 0\nvn 0 0 1\n\
+         f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\nf 2/1 5/1 3/1\nf -1 -2 -3\n",
+    )
+    .unwrap();
+    let scene = dir.join("s.scene.ron");
+    std::fs::copy(
+        common::root().join("fuzz/regressions/scene/moving-open-mesh-vhacd-panic.scene.ron"),
+        &scene,
+    )
+    .unwrap();
+    let out = modesuite().arg("validate").arg(&scene).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    println!("{err}");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(err.contains("convex decomposition failed"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let loud = modesuite()
+        .env("MODESUITE_LOUD_PANICS", "1")
+        .arg("validate")
+        .arg(&scene)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&loud.stderr);
+    assert!(err.contains("panicked"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

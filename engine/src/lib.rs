@@ -62,13 +62,48 @@ pub use scene::{SceneDesc, SceneError, SceneModel, SceneSource};
 /// Runs `f`, turning a panic into `Err` with its message (the payload's text, or empty): for
 /// third-party code that asserts on input it should have refused (rapier on inconsistent sets,
 /// parry on degenerate meshes), so that the caller can report an error instead of unwinding.
+/// The panic is not printed (see [`with_quiet_panics`]): the error reports it.
 pub fn catch_panic<R>(f: impl FnOnce() -> R) -> Result<R, String> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
+    with_quiet_panics(|| std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))).map_err(|p| {
         p.downcast_ref::<String>()
             .cloned()
             .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
             .unwrap_or_default()
     })
+}
+
+thread_local! {
+    /// Depth of [`with_quiet_panics`] calls on this thread.
+    static QUIET_PANICS: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
+}
+
+/// Runs `f` with the panic messages of this thread silenced: for code whose panics are caught
+/// and reported as errors ([`catch_panic`], the fuzz campaigns), so that users see the error
+/// and not a panic message before it. A panic hook installed once per process does this and
+/// otherwise calls the previous hook; with `MODESUITE_LOUD_PANICS` (or `MODESUITE_FUZZ_LOUD`)
+/// set, every panic is printed, to see where one happened.
+pub fn with_quiet_panics<R>(f: impl FnOnce() -> R) -> R {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        let loud = ["MODESUITE_LOUD_PANICS", "MODESUITE_FUZZ_LOUD"]
+            .iter()
+            .any(|v| std::env::var_os(v).is_some());
+        std::panic::set_hook(Box::new(move |info| {
+            if loud || QUIET_PANICS.with(|q| q.get()) == 0 {
+                previous(info);
+            }
+        }));
+    });
+    struct Depth;
+    impl Drop for Depth {
+        fn drop(&mut self) {
+            QUIET_PANICS.with(|q| q.set(q.get() - 1));
+        }
+    }
+    QUIET_PANICS.with(|q| q.set(q.get() + 1));
+    let _depth = Depth;
+    f()
 }
 
 /// Re-exports of the math and ECS crates, so plugins use the same versions.

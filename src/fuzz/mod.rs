@@ -196,15 +196,13 @@ pub fn run_campaign(t: &'static Target, c: &Campaign, progress: &mut dyn FnMut(&
     let mut corpus = (t.seeds)();
     corpus.extend(regressions(t.name).into_iter().map(|(_, b)| b));
     let dog = Watchdog::start(t.name, c.hang_limit, c.out.clone());
-    quiet_panics_in_campaigns();
     let mut mutator =
         mutate::Mutator::new(c.seed ^ modesuite_learn::checkpoint::fnv1a(t.name.as_bytes()));
     let one = |input: &[u8], report: &mut Report| {
         dog.begin(input);
         let t0 = Instant::now();
-        IN_CAMPAIGN.with(|f| f.set(true));
-        let r = run_one(t, input);
-        IN_CAMPAIGN.with(|f| f.set(false));
+        // an input's panic is reported, not printed (unless MODESUITE_FUZZ_LOUD is set)
+        let r = modesuite_engine::with_quiet_panics(|| run_one(t, input));
         report.slowest_s = report.slowest_s.max(t0.elapsed().as_secs_f64());
         dog.end();
         report.tried += 1;
@@ -236,25 +234,4 @@ pub fn run_campaign(t: &'static Target, c: &Campaign, progress: &mut dyn FnMut(&
     drop(dog);
     report.wall_s = started.elapsed().as_secs_f64();
     report
-}
-
-thread_local! {
-    /// Whether this thread is running a campaign's input (its panics are reported, not printed).
-    static IN_CAMPAIGN: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-/// Installs, once per process, a panic hook that is silent on threads running a campaign's
-/// input (unless `MODESUITE_FUZZ_LOUD` is set, to see where an input panics) and otherwise does
-/// what the previous hook did.
-fn quiet_panics_in_campaigns() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        let previous = std::panic::take_hook();
-        let loud = std::env::var_os("MODESUITE_FUZZ_LOUD").is_some();
-        std::panic::set_hook(Box::new(move |info| {
-            if loud || !IN_CAMPAIGN.with(|f| f.get()) {
-                previous(info);
-            }
-        }));
-    });
 }

@@ -140,11 +140,12 @@ impl Recording {
         }
     }
 
-    /// Writes the recording as pretty JSON.
+    /// Writes the recording as pretty JSON, atomically (a temporary file, synced, renamed over
+    /// `path`): a crash or a full disk leaves the previous file whole.
     pub fn save(&self, path: &Path) -> Result<(), RenderError> {
         let text = serde_json::to_string_pretty(self)
             .map_err(|e| RenderError::Output(format!("{}: {e}", path.display())))?;
-        std::fs::write(path, text)
+        modesuite_engine::fsio::write_atomic(path, text.as_bytes())
             .map_err(|e| RenderError::Output(format!("{}: {e}", path.display())))
     }
 
