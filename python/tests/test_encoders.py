@@ -7,7 +7,7 @@ The reference follows the published model (facebookresearch/dinov2, Hugging Face
 patches, the 37 x 37 position embedding resampled bicubically (A = -0.75) with scale factor
 (16 + 0.1) / 37, 12 pre-norm blocks (6 heads of 64, exact GELU, LayerScale, LN eps 1e-6), the
 final norm's CLS token. It is written with numpy matrices (interpolation as matrix products,
-attention as batched einsum), in float64, sharing no code with the Rust one.
+attention as batched matrix products), in float64, sharing no code with the Rust one.
 """
 
 from __future__ import annotations
@@ -164,7 +164,7 @@ def reference_features(w: dict[str, np.ndarray], rgb: np.ndarray) -> np.ndarray:
     h_in, w_in, _ = rgb.shape
     img = rgb.astype(np.float64) / 255.0
     ry, rx = linear_matrix(h_in, 224), linear_matrix(w_in, 224)
-    img = np.einsum("yi,ijc,xj->cyx", ry, img, rx)
+    img = np.einsum("yi,ijc,xj->cyx", ry, img, rx, optimize=True)
     img = (img - MEAN[:, None, None]) / STD[:, None, None]
     g = 224 // PATCH
     patches = img.reshape(3, g, PATCH, g, PATCH).transpose(1, 3, 0, 2, 4).reshape(g * g, -1)
@@ -172,18 +172,18 @@ def reference_features(w: dict[str, np.ndarray], rgb: np.ndarray) -> np.ndarray:
     pos = w["pos_embed"][0]
     grid = pos[1:].reshape(GRID_W, GRID_W, DIM)
     c = cubic_matrix(GRID_W, g, (g + 0.1) / GRID_W)
-    patch_pos = np.einsum("yi,ijd,xj->yxd", c, grid, c).reshape(g * g, DIM)
+    patch_pos = np.einsum("yi,ijd,xj->yxd", c, grid, c, optimize=True).reshape(g * g, DIM)
     x = np.concatenate([w["cls_token"][0] + pos[:1], x + patch_pos])
     hd = DIM // HEADS
     for i in range(DEPTH):
         b = f"blocks.{i}"
         h = layer_norm(x, w[f"{b}.norm1.weight"], w[f"{b}.norm1.bias"])
         qkv = (h @ w[f"{b}.attn.qkv.weight"].T + w[f"{b}.attn.qkv.bias"]).reshape(len(x), 3, HEADS, hd)
-        q, k, v = qkv[:, 0], qkv[:, 1], qkv[:, 2]
-        s = np.einsum("nhd,mhd->hnm", q, k) / math.sqrt(hd)
+        q, k, v = (qkv[:, j].transpose(1, 0, 2) for j in range(3))  # [heads, tokens, hd]
+        s = q @ k.transpose(0, 2, 1) / math.sqrt(hd)
         s = np.exp(s - s.max(-1, keepdims=True))
         s /= s.sum(-1, keepdims=True)
-        o = np.einsum("hnm,mhd->nhd", s, v).reshape(len(x), DIM)
+        o = (s @ v).transpose(1, 0, 2).reshape(len(x), DIM)
         x = x + w[f"{b}.ls1.gamma"] * (o @ w[f"{b}.attn.proj.weight"].T + w[f"{b}.attn.proj.bias"])
         h = layer_norm(x, w[f"{b}.norm2.weight"], w[f"{b}.norm2.bias"])
         m = gelu(h @ w[f"{b}.mlp.fc1.weight"].T + w[f"{b}.mlp.fc1.bias"])
