@@ -419,7 +419,7 @@ pub fn load_run_policy(
     if meta["algo"] == "retrieval" {
         let r = crate::retrieval::Retrieval::load(&pdir)?;
         return Ok((
-            Box::new(crate::retrieval::RetrievalPolicy { r, inputs }),
+            Box::new(crate::retrieval::RetrievalPolicy::new(r, inputs)),
             origin,
         ));
     }

@@ -4,18 +4,26 @@
 //! each observation value by the demonstrations' standard deviation) and returns their actions'
 //! mean weighted by `1 / distance` (a frame at distance 0 alone decides). With `k = 1` this
 //! replays the matched frame's action, so a demonstration started from its own seed is replayed
-//! exactly. Observations are the state vector (image features are not built yet).
+//! exactly. Observations are what the policy's inputs say (`crate::inputs`: the state, image
+//! features, or both).
+//!
+//! With a `horizon` H > 1 (and `k = 1`), the matched demonstration's actions are replayed: the
+//! policy takes the matched frame's action and the next H - 1 actions of the same
+//! demonstration (fewer at its end) before it looks again, as DeMoBot replays a retrieved
+//! segment; between two looks it neither observes nor renders.
 //!
 //! A retrieval policy is a folder like a trained one: `policy.json` (`algo: "retrieval"`,
-//! sizes, `k`, the note with target and action modes) and `retrieval.bin` (little-endian f32:
-//! the scales, the scaled observations, the actions).
+//! sizes, `k`, `horizon`, the demonstrations' `episode_ends`, the note with target and action
+//! modes) and `retrieval.bin` (little-endian f32: the scales, the scaled observations, the
+//! actions).
 
 use std::path::Path;
 
 use serde_json::json;
 
-/// Version of the retrieval folder's layout.
-pub const RETRIEVAL_FORMAT_VERSION: u64 = 1;
+/// Version of the retrieval folder's layout (2 added `horizon` and `episode_ends`; version 1
+/// folders still load, as horizon 1).
+pub const RETRIEVAL_FORMAT_VERSION: u64 = 2;
 /// Largest number of frames a retrieval policy may declare (a damaged file must not make
 /// loading allocate without bound).
 const MAX_FRAMES: usize = 1 << 24;
@@ -26,6 +34,9 @@ pub struct Retrieval {
     obs_dim: usize,
     act_dim: usize,
     k: usize,
+    horizon: usize,
+    /// One past the last frame of each demonstration, ascending (the last is `len()`).
+    episode_ends: Vec<usize>,
     scale: Vec<f32>,
     obs: Vec<f32>,
     act: Vec<f32>,
@@ -33,6 +44,7 @@ pub struct Retrieval {
 
 impl Retrieval {
     /// The policy of frames `obs` (`n x obs_dim`) and their actions (`n x act_dim`); `k >= 1`.
+    /// The frames form one demonstration; see [`Retrieval::with_replay`].
     pub fn new(obs: &[f32], act: &[f32], obs_dim: usize, act_dim: usize, k: usize) -> Self {
         let n = obs.len() / obs_dim.max(1);
         let mut scale = vec![1.0f32; obs_dim];
@@ -53,10 +65,50 @@ impl Retrieval {
             obs_dim,
             act_dim,
             k: k.max(1),
+            horizon: 1,
+            episode_ends: vec![n],
             scale,
             obs: scaled,
             act: act.to_vec(),
         }
+    }
+
+    /// Replays `horizon` actions of the matched demonstration per look (`k` must be 1 for
+    /// `horizon > 1`); `episode_ends` are one past each demonstration's last frame, ascending,
+    /// the last equal to the number of frames.
+    pub fn with_replay(mut self, horizon: usize, episode_ends: Vec<usize>) -> Result<Self, String> {
+        if horizon == 0 || (horizon > 1 && self.k > 1) {
+            return Err(format!(
+                "horizon = {horizon}, k = {}: horizon >= 1, and k = 1 to replay more than one action",
+                self.k
+            ));
+        }
+        let sorted = episode_ends.windows(2).all(|w| w[0] < w[1]);
+        if !sorted || episode_ends.first() == Some(&0) || episode_ends.last() != Some(&self.len()) {
+            return Err(format!(
+                "episode_ends {episode_ends:?}: ascending, positive, the last = {} frames",
+                self.len()
+            ));
+        }
+        self.horizon = horizon;
+        self.episode_ends = episode_ends;
+        Ok(self)
+    }
+
+    /// Actions replayed per look.
+    pub fn horizon(&self) -> usize {
+        self.horizon
+    }
+
+    /// The frame after `frame` in its demonstration, if any.
+    pub fn next_in_demo(&self, frame: usize) -> Option<usize> {
+        let end = self.episode_ends.iter().find(|&&e| e > frame)?;
+        (frame + 1 < *end).then_some(frame + 1)
+    }
+
+    /// The action of a frame.
+    pub fn action_of(&self, frame: usize) -> &[f32] {
+        &self.act[frame * self.act_dim..(frame + 1) * self.act_dim]
     }
 
     /// Frames held.
@@ -131,6 +183,7 @@ impl Retrieval {
             .map_err(|e| format!("{}: {e}", bin.display()))?;
         let meta = json!({"format_version": RETRIEVAL_FORMAT_VERSION, "algo": "retrieval",
                           "obs_dim": self.obs_dim, "act_dim": self.act_dim, "k": self.k,
+                          "horizon": self.horizon, "episode_ends": self.episode_ends,
                           "frames": self.len(), "note": note});
         let path = dir.join("policy.json");
         let text = serde_json::to_string_pretty(&meta).map_err(|e| e.to_string())?;
@@ -157,9 +210,10 @@ impl Retrieval {
             field("k")?,
             field("frames")?,
         );
-        if meta["format_version"].as_u64() != Some(RETRIEVAL_FORMAT_VERSION) {
+        let version = meta["format_version"].as_u64();
+        if !matches!(version, Some(1) | Some(RETRIEVAL_FORMAT_VERSION)) {
             return Err(format!(
-                "{}: format_version: this build reads {RETRIEVAL_FORMAT_VERSION}",
+                "{}: format_version: this build reads 1 and {RETRIEVAL_FORMAT_VERSION}",
                 path.display()
             ));
         }
@@ -193,14 +247,29 @@ impl Retrieval {
                 bin.display()
             ));
         }
-        Ok(Self {
+        let loaded = Self {
             obs_dim: od,
             act_dim: ad,
             k,
+            horizon: 1,
+            episode_ends: vec![n],
             scale: v[..od].to_vec(),
             obs: v[od..od + n * od].to_vec(),
             act: v[od + n * od..].to_vec(),
-        })
+        };
+        if version == Some(1) {
+            return Ok(loaded);
+        }
+        let horizon = field("horizon")?;
+        let ends: Option<Vec<usize>> = meta["episode_ends"].as_array().map(|a| {
+            a.iter()
+                .map(|v| v.as_u64().map_or(0, |v| v as usize))
+                .collect()
+        });
+        let ends = ends.ok_or_else(|| format!("{}: episode_ends is missing", path.display()))?;
+        loaded
+            .with_replay(horizon, ends)
+            .map_err(|e| format!("{}: {e}", path.display()))
     }
 }
 
@@ -210,23 +279,59 @@ pub struct RetrievalPolicy {
     pub r: Retrieval,
     /// What it observes.
     pub inputs: crate::inputs::Observer,
+    /// The frame being replayed and how many more actions of its demonstration to replay.
+    replay: Option<(usize, usize)>,
+}
+
+impl RetrievalPolicy {
+    /// The policy of `r` observing `inputs`.
+    pub fn new(r: Retrieval, inputs: crate::inputs::Observer) -> Self {
+        Self {
+            r,
+            inputs,
+            replay: None,
+        }
+    }
 }
 
 impl modesuite_tasks::expert::Policy for RetrievalPolicy {
+    fn reset(&mut self, _seed: u64) {
+        self.replay = None;
+    }
+
     fn act(
         &mut self,
         env: &modesuite_engine::prelude::Env,
         action: &mut [f32],
     ) -> Result<(), String> {
+        // replaying the matched demonstration: its next action, without looking
+        if let Some((frame, left)) = self.replay {
+            if let Some(next) = self.r.next_in_demo(frame).filter(|_| left > 0) {
+                self.replay = Some((next, left - 1));
+                action.copy_from_slice(self.r.action_of(next));
+                return Ok(());
+            }
+        }
         let r = &self.r;
+        let mut matched = None;
         crate::learning::act_on_inputs(
             &mut self.inputs,
             env,
             action,
             r.obs_dim(),
             r.act_dim(),
-            |o| r.act(o),
-        )
+            |o| {
+                if r.horizon() > 1 {
+                    let (i, _) = r.nearest(o, 1)[0];
+                    matched = Some(i);
+                    r.action_of(i).to_vec()
+                } else {
+                    r.act(o)
+                }
+            },
+        )?;
+        self.replay = matched.map(|i| (i, r.horizon() - 1));
+        Ok(())
     }
 }
 
@@ -255,6 +360,29 @@ mod tests {
                 act[f * 2..f * 2 + 2].to_vec()
             );
         }
+    }
+
+    #[test]
+    fn replay_stays_inside_a_demonstration_and_round_trips() {
+        // frames 0..2 are one demonstration, 2..5 another
+        let r = demo();
+        let e = r.clone().with_replay(4, vec![2, 5]).unwrap_err();
+        assert!(e.contains("k = 1"), "{e}");
+        let obs: Vec<f32> = (0..15).map(|i| (i * i % 7) as f32 - 2.0).collect();
+        let act: Vec<f32> = (0..10).map(|i| i as f32 * 0.1).collect();
+        let r = Retrieval::new(&obs, &act, 3, 2, 1)
+            .with_replay(4, vec![2, 5])
+            .unwrap();
+        let next: Vec<Option<usize>> = (0..5).map(|f| r.next_in_demo(f)).collect();
+        assert_eq!(next, [Some(1), None, Some(3), Some(4), None]);
+        assert_eq!(r.action_of(3), &act[6..8]);
+        for bad in [vec![2, 4], vec![0, 5], vec![3, 2, 5]] {
+            assert!(r.clone().with_replay(2, bad).is_err());
+        }
+        let dir = std::env::temp_dir().join(format!("modesuite-replay-{}", std::process::id()));
+        r.save(&dir, "{}").unwrap();
+        assert_eq!(Retrieval::load(&dir).unwrap(), r);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

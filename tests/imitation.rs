@@ -147,7 +147,33 @@ fn bc_overfits_one_demonstration_and_replays_it() {
         "{replayed} vs {recorded}"
     );
     assert_eq!(replayed["success"], true);
-    for d in [data, a, b, r] {
+    // replaying 5 actions of the matched demonstration per look reproduces it too
+    let h = scratch("h");
+    ok(cli(&[
+        "train",
+        TASK,
+        "--algo",
+        "retrieval",
+        "--dataset",
+        data.to_str().unwrap(),
+        "--out",
+        h.to_str().unwrap(),
+        "--set",
+        "horizon=5",
+    ]));
+    let run = ok(cli(&[
+        "run",
+        TASK,
+        "--policy",
+        h.to_str().unwrap(),
+        "--seed",
+        "7",
+        "--json",
+    ]));
+    let chunked: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
+    println!("retrieval with horizon 5: {chunked}");
+    assert_eq!(chunked["return"], recorded["return"]);
+    for d in [data, a, b, r, h] {
         let _ = std::fs::remove_dir_all(d);
     }
 }

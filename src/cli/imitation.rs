@@ -25,7 +25,7 @@ fn demos(
     successful_only: bool,
     low: Vec<f32>,
     high: Vec<f32>,
-) -> Result<(Demos, usize), CliError> {
+) -> Result<(Demos, Used), CliError> {
     let mut d = Demos {
         low,
         high,
@@ -33,6 +33,7 @@ fn demos(
     };
     let feature_col = spec.feature_column();
     let mut used = 0;
+    let mut ends = Vec::new();
     for (i, meta) in ds.episodes.iter().enumerate() {
         if successful_only && meta.success != Some(true) {
             continue;
@@ -65,6 +66,7 @@ fn demos(
             }
         }
         d.act.extend_from_slice(a);
+        ends.push(d.act.len() / ad.max(1));
     }
     if used == 0 {
         return Err(CliError::input(format!(
@@ -73,7 +75,19 @@ fn demos(
             if successful_only { "successful " } else { "" }
         )));
     }
-    Ok((d, used))
+    Ok((
+        d,
+        Used {
+            episodes: used,
+            ends,
+        },
+    ))
+}
+
+/// The demonstrations a policy learns from: how many, and one past each one's last frame.
+struct Used {
+    episodes: usize,
+    ends: Vec<usize>,
 }
 
 /// The behaviour-cloning settings: defaults, `--config FILE` (RON `BcConfig`), each `--set
@@ -141,7 +155,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let features: Option<ImageFeatures> =
         serde_json::from_value(ds.extra["features"].clone()).unwrap_or(None);
     let inputs = InputSpec::parse(&args.inputs, features).map_err(CliError::input)?;
-    let (mut demos, episodes) = demos(
+    let (mut demos, used) = demos(
         &ds,
         &inputs,
         args.successful_only,
@@ -164,13 +178,13 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     }
     let note = json!({"target": args.target, "actions": actions, "algo": args.algo,
                       "dataset": dir.display().to_string(), "inputs": inputs,
-                      "episodes": episodes, "successful_only": args.successful_only,
+                      "episodes": used.episodes, "successful_only": args.successful_only,
                       "command": std::env::args().collect::<Vec<_>>().join(" ")})
     .to_string();
     let policy_dir = args.out.join("policy");
     if args.algo == "retrieval" {
         let what = inputs.describe();
-        return retrieval(args, &demos, &what, &note, &policy_dir, episodes, out);
+        return retrieval(args, &demos, &what, &note, &policy_dir, &used, out);
     }
     let cfg = config(args)?;
     let identity = format!(
@@ -187,7 +201,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         cfg.seed,
         demos.len(),
         inputs.describe(),
-        episodes,
+        used.episodes,
         dir.display(),
         args.out.display()
     )
@@ -225,35 +239,38 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     .map_err(io)
 }
 
-/// `train --algo retrieval`: every demonstration frame kept; `--set k=N` neighbours (default 1).
+/// `train --algo retrieval`: every demonstration frame kept; `--set k=N` neighbours (default
+/// 1), `--set horizon=H` actions of the matched demonstration replayed per look (default 1).
 fn retrieval(
     args: &TrainArgs,
     demos: &Demos,
     inputs: &str,
     note: &str,
     policy_dir: &Path,
-    episodes: usize,
+    used: &Used,
     out: &mut dyn Write,
 ) -> Result<(), CliError> {
     if args.config.is_some() {
         return Err(CliError::input(
-            "--config: retrieval has one setting, --set k=N",
+            "--config: retrieval's settings are --set k=N and --set horizon=H",
         ));
     }
-    let mut k = 1usize;
+    let (mut k, mut horizon) = (1usize, 1usize);
     for kv in &args.set {
-        match kv.split_once('=') {
-            Some(("k", v)) => {
-                k = v.trim().parse().ok().filter(|k| *k >= 1).ok_or_else(|| {
-                    CliError::input(format!("--set {kv}: k is a whole number >= 1"))
-                })?
-            }
+        let (key, v) = kv.split_once('=').unwrap_or((kv, ""));
+        let slot = match key {
+            "k" => &mut k,
+            "horizon" => &mut horizon,
             _ => {
                 return Err(CliError::input(format!(
-                    "--set {kv}: retrieval has one setting, k=N"
+                    "--set {kv}: retrieval's settings are k=N and horizon=H"
                 )))
             }
-        }
+        };
+        *slot =
+            v.trim().parse().ok().filter(|n| *n >= 1).ok_or_else(|| {
+                CliError::input(format!("--set {kv}: {key} is a whole number >= 1"))
+            })?;
     }
     if demos.discrete.is_some() && k > 1 {
         return Err(CliError::input(format!(
@@ -261,14 +278,17 @@ fn retrieval(
         )));
     }
     let r =
-        crate::retrieval::Retrieval::new(&demos.obs, &demos.act, demos.obs_dim, demos.act_dim, k);
+        crate::retrieval::Retrieval::new(&demos.obs, &demos.act, demos.obs_dim, demos.act_dim, k)
+            .with_replay(horizon, used.ends.clone())
+            .map_err(|e| CliError::input(format!("--set: {e}")))?;
     r.save(policy_dir, note).map_err(CliError::runtime)?;
     writeln!(
         out,
-        "retrieval {} ({}): {} frames of {episodes} episodes, k = {k}; policy {}",
+        "retrieval {} ({}): {} frames of {} episodes, k = {k}, horizon {horizon}; policy {}",
         args.target,
         inputs,
         r.len(),
+        used.episodes,
         policy_dir.display()
     )
     .map_err(io)
