@@ -19,10 +19,11 @@ if not any(k in os.environ for k in ("XDG_RUNTIME_DIR", "NODEVICE_SELECT", "MESA
     os.environ["NODEVICE_SELECT"] = "1"
 
 from . import _core  # noqa: E402
-from ._core import Policy, SceneError  # noqa: E402
+from ._core import Encoder, Policy, SceneError  # noqa: E402
 from .envs import OBS_MODES, ModeSuiteEnv, ModeSuiteVectorEnv  # noqa: E402
 
 __all__ = [
+    "Encoder",
     "ModeSuiteEnv",
     "ModeSuiteVectorEnv",
     "OBS_MODES",

@@ -12,6 +12,7 @@
 //! it cannot trust.
 
 mod convert;
+mod encoder;
 
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -680,6 +681,7 @@ fn _panic_for_test(message: &str) -> PyResult<()> {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Core>()?;
     m.add_class::<Policy>()?;
+    m.add_class::<encoder::Encoder>()?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add_function(wrap_pyfunction!(task_ids, m)?)?;
     m.add_function(wrap_pyfunction!(scene_episode_steps, m)?)?;

@@ -307,3 +307,36 @@ def test_pooled_encoder_is_the_grid_mean(modesuite_bin, tmp_path):
             cell = rgb[cy * h // 8:(cy + 1) * h // 8, cx * w // 8:(cx + 1) * w // 8] / 255.0
             np.testing.assert_allclose(f[cy, cx, :3], cell.reshape(-1, 3).mean(0), atol=1e-6)
     assert np.all(f[:, :, 3] == 0.0)  # no depth in a PNG
+
+
+def test_python_encoder_equals_the_cli(modesuite_bin, dinov2_files, tmp_path):
+    import modesuite
+
+    original, _, _ = dinov2_files
+    rgbs = [make_image(5), make_image(6)]  # the second a transposed (strided) view
+    for i, rgb in enumerate(rgbs):
+        write_png(tmp_path / f"p{i}.png", rgb)
+    paths = [str(tmp_path / f"p{i}.png") for i in range(2)]
+    for name, extra in (("pooled", []), ("dinov2", ["--weights", str(original)])):
+        enc = modesuite.Encoder(name, weights=original if name == "dinov2" else None)
+        assert enc.name == name
+        cli = encode(modesuite_bin, *paths, "--encoder", name, *extra)
+        batch = enc.encode(np.stack(rgbs))
+        assert batch.shape == (2, enc.dim) and batch.dtype == np.float32
+        for i, rgb in enumerate(rgbs):
+            one = enc.encode(rgb)
+            # the same numbers, bit for bit, one at a time, in a batch and through the CLI
+            assert np.array_equal(one, batch[i])
+            assert np.array_equal(one, np.array(cli[i]["feature"], dtype=np.float32)), name
+    pooled = modesuite.Encoder()
+    depth = np.full((128, 128), 2.5, dtype=np.float32)
+    f = pooled.encode(rgbs[0], depth)
+    assert np.allclose(f.reshape(8, 8, 4)[:, :, 3], 0.5)
+    with pytest.raises(ValueError, match="expected \\(h, w, 3\\)"):
+        pooled.encode(np.zeros((4, 4), dtype=np.uint8))
+    with pytest.raises(ValueError, match="depth of shape"):
+        pooled.encode(rgbs[0], np.zeros((3, 3), dtype=np.float32))
+    with pytest.raises(ValueError, match="unknown"):
+        modesuite.Encoder("clip")
+    with pytest.raises(ValueError, match="needs the weights file"):
+        modesuite.Encoder("dinov2")
