@@ -45,6 +45,33 @@ fn train(data: &Path, out: &Path) -> String {
     ]))
 }
 
+/// Trains a retrieval policy of `task` on `data` into `out` with `extra` arguments and runs it
+/// for one episode from `seed`: the training's output and the episode's JSON object.
+fn retrieval_run(
+    task: &str,
+    data: &Path,
+    out: &Path,
+    extra: &[&str],
+    seed: &str,
+) -> (String, serde_json::Value) {
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let mut args = vec![
+        "train",
+        task,
+        "--algo",
+        "retrieval",
+        "--dataset",
+        d,
+        "--out",
+        o,
+    ];
+    args.extend_from_slice(extra);
+    let trained = ok(cli(&args));
+    let run = ok(cli(&["run", task, "--policy", o, "--seed", seed, "--json"]));
+    let episode = serde_json::from_str(run.lines().next().unwrap()).unwrap();
+    (trained, episode)
+}
+
 #[test]
 fn bc_overfits_one_demonstration_and_replays_it() {
     let data = scratch("data");
@@ -118,30 +145,8 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     assert!(err.contains("recorded on"), "{err}");
     // retrieval (k = 1) replays the demonstration exactly: the same return, bit for bit
     let r = scratch("r");
-    println!(
-        "{}",
-        ok(cli(&[
-            "train",
-            TASK,
-            "--algo",
-            "retrieval",
-            "--dataset",
-            data.to_str().unwrap(),
-            "--out",
-            r.to_str().unwrap()
-        ]))
-    );
-    let run = ok(cli(&[
-        "run",
-        TASK,
-        "--policy",
-        r.to_str().unwrap(),
-        "--seed",
-        "7",
-        "--json",
-    ]));
-    let replayed: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
-    println!("retrieval from the demonstration's seed: {replayed}");
+    let (trained, replayed) = retrieval_run(TASK, &data, &r, &[], "7");
+    println!("{trained}retrieval from the demonstration's seed: {replayed}");
     assert_eq!(
         replayed["return"], recorded["return"],
         "{replayed} vs {recorded}"
@@ -149,28 +154,7 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     assert_eq!(replayed["success"], true);
     // replaying 5 actions of the matched demonstration per look reproduces it too
     let h = scratch("h");
-    ok(cli(&[
-        "train",
-        TASK,
-        "--algo",
-        "retrieval",
-        "--dataset",
-        data.to_str().unwrap(),
-        "--out",
-        h.to_str().unwrap(),
-        "--set",
-        "horizon=5",
-    ]));
-    let run = ok(cli(&[
-        "run",
-        TASK,
-        "--policy",
-        h.to_str().unwrap(),
-        "--seed",
-        "7",
-        "--json",
-    ]));
-    let chunked: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
+    let (_, chunked) = retrieval_run(TASK, &data, &h, &["--set", "horizon=5"], "7");
     println!("retrieval with horizon 5: {chunked}");
     assert_eq!(chunked["return"], recorded["return"]);
     for d in [data, a, b, r, h] {
@@ -207,33 +191,12 @@ fn retrieval_on_image_features_replays_its_demonstration() {
     let info = ok(cli(&["dataset", "info", data.to_str().unwrap(), "--json"]));
     assert!(info.contains("observation.features.pooled"), "{info}");
     let r = scratch("img-r");
-    let trained = ok(cli(&[
-        "train",
-        task,
-        "--algo",
-        "retrieval",
-        "--inputs",
-        "features",
-        "--dataset",
-        data.to_str().unwrap(),
-        "--out",
-        r.to_str().unwrap(),
-    ]));
+    let (trained, replayed) = retrieval_run(task, &data, &r, &["--inputs", "features"], "11");
     println!("{trained}");
     assert!(
         trained.contains("features (pooled of camera robot)"),
         "{trained}"
     );
-    let run = ok(cli(&[
-        "run",
-        task,
-        "--policy",
-        r.to_str().unwrap(),
-        "--seed",
-        "11",
-        "--json",
-    ]));
-    let replayed: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
     println!("retrieval on image features from the demonstration's seed: {replayed}");
     assert_eq!(replayed["length"], recorded["length"]);
     assert_eq!(replayed["return"], recorded["return"]);
