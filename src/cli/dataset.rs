@@ -306,7 +306,6 @@ pub fn record(args: &RecordArgs, out: &mut dyn Write) -> Result<(), CliError> {
         let line = session.episode(policy.as_mut(), seed, args.noise, steps)?;
         print_episode(&line, args.json, out)?;
     }
-    session.close();
     Ok(())
 }
 
@@ -497,9 +496,12 @@ impl Session {
     pub(super) fn env(&self) -> &Env {
         &self.setup.env
     }
+}
 
-    /// Removes the staging folder of the videos.
-    pub(super) fn close(self) {
+impl Drop for Session {
+    /// Removes the staging folder of the videos (committed episodes' videos were moved out of
+    /// it), also when the session ends with an error or with the viewer of `--record-dataset`.
+    fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.staging);
     }
 }

@@ -123,7 +123,6 @@ pub fn import(args: &ImportArgs, out: &mut dyn Write) -> Result<(), CliError> {
             print_episode(&line, args.json, out)?;
         }
     }
-    s.close();
     Ok(())
 }
 
