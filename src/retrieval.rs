@@ -102,7 +102,8 @@ impl Retrieval {
 
     /// The frame after `frame` in its demonstration, if any.
     pub fn next_in_demo(&self, frame: usize) -> Option<usize> {
-        let end = self.episode_ends.iter().find(|&&e| e > frame)?;
+        let end =
+            self.episode_ends[self.episode_ends.partition_point(|&e| e <= frame)..].first()?;
         (frame + 1 < *end).then_some(frame + 1)
     }
 
@@ -151,11 +152,16 @@ impl Retrieval {
 
     /// The action for `obs` (see the module).
     pub fn act(&self, obs: &[f32]) -> Vec<f32> {
+        self.act_matched(obs).0
+    }
+
+    /// [`Retrieval::act`] and the frame whose action it is, when one frame decides (`k = 1`
+    /// or a frame at distance 0).
+    pub fn act_matched(&self, obs: &[f32]) -> (Vec<f32>, Option<usize>) {
         let near = self.nearest(obs, self.k);
-        let row = |i: usize| &self.act[i * self.act_dim..(i + 1) * self.act_dim];
         if let Some(&(i, d)) = near.first() {
             if d == 0.0 || near.len() == 1 {
-                return row(i).to_vec();
+                return (self.action_of(i).to_vec(), Some(i));
             }
         }
         let mut out = vec![0.0f64; self.act_dim];
@@ -163,11 +169,12 @@ impl Retrieval {
         for (i, d) in near {
             let w = 1.0 / f64::from(d);
             total += w;
-            for (o, a) in out.iter_mut().zip(row(i)) {
+            for (o, a) in out.iter_mut().zip(self.action_of(i)) {
                 *o += w * f64::from(*a);
             }
         }
-        out.iter().map(|o| (o / total.max(1e-300)) as f32).collect()
+        let mean = out.iter().map(|o| (o / total.max(1e-300)) as f32).collect();
+        (mean, None)
     }
 
     /// Writes the policy folder `dir` (`policy.json` last, each file atomically).
@@ -321,16 +328,14 @@ impl modesuite_tasks::expert::Policy for RetrievalPolicy {
             r.obs_dim(),
             r.act_dim(),
             |o| {
-                if r.horizon() > 1 {
-                    let (i, _) = r.nearest(o, 1)[0];
-                    matched = Some(i);
-                    r.action_of(i).to_vec()
-                } else {
-                    r.act(o)
-                }
+                let (a, m) = r.act_matched(o);
+                matched = m;
+                a
             },
         )?;
-        self.replay = matched.map(|i| (i, r.horizon() - 1));
+        self.replay = matched
+            .filter(|_| r.horizon() > 1)
+            .map(|i| (i, r.horizon() - 1));
         Ok(())
     }
 }

@@ -1,15 +1,25 @@
 //! `modesuite.Encoder`: the image encoders of the learning crate (`pooled`, DINOv2 ViT-S/14)
 //! on numpy images, the features `record --encoder` caches and image policies compute.
 
+use std::borrow::Cow;
 use std::path::PathBuf;
 
-use numpy::{PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{Element, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use modesuite::learn::encoder::{encoder_by_name, Image, ImageEncoder};
 
 use crate::convert;
+
+/// The values of `a` in row-major order: borrowed when contiguous, copied from a strided view
+/// (a transposed or sliced image).
+fn row_major<'a, T: Element + Copy>(a: &'a PyReadonlyArrayDyn<'_, T>) -> Cow<'a, [T]> {
+    match a.as_slice() {
+        Ok(s) => Cow::Borrowed(s),
+        Err(_) => Cow::Owned(a.as_array().iter().copied().collect()),
+    }
+}
 
 /// An image encoder: `Encoder("pooled")` (weights-free) or `Encoder("dinov2",
 /// weights="model.safetensors")` (DINOv2 ViT-S/14, Hugging Face or original/timm key names).
@@ -50,16 +60,7 @@ impl Encoder {
             }
         };
         let n = batch.unwrap_or(1);
-        // a strided view (a transposed or sliced image) is copied into row-major order
-        let rgb_owned: Vec<u8>;
-        let rgb = match rgb.as_slice() {
-            Ok(s) => s,
-            Err(_) => {
-                rgb_owned = rgb.as_array().iter().copied().collect();
-                &rgb_owned
-            }
-        };
-        let depth_owned: Vec<f32>;
+        let rgb = row_major(&rgb);
         let depth_values = match &depth {
             Some(d) => {
                 let want: Vec<usize> = batch.into_iter().chain([h, w]).collect();
@@ -69,20 +70,14 @@ impl Encoder {
                         d.shape()
                     )));
                 }
-                Some(match d.as_slice() {
-                    Ok(s) => s,
-                    Err(_) => {
-                        depth_owned = d.as_array().iter().copied().collect();
-                        &depth_owned[..]
-                    }
-                })
+                Some(row_major(d))
             }
             None => None,
         };
         let mut images = Vec::with_capacity(n);
         for i in 0..n {
             let px = h * w;
-            let d = depth_values.map(|d| &d[i * px..(i + 1) * px]);
+            let d = depth_values.as_deref().map(|d| &d[i * px..(i + 1) * px]);
             images.push(
                 Image::rgbd(w, h, &rgb[i * 3 * px..(i + 1) * 3 * px], d)
                     .map_err(|e| PyValueError::new_err(e.to_string()))?,

@@ -400,40 +400,33 @@ impl Dinov2 {
         out
     }
 
-    fn forward(&self, patches: Vec<f32>, batch: usize) -> Tensor<2> {
+    /// The CLS feature (`[1, dim]`) of one image's patches.
+    fn forward(&self, patches: Vec<f32>) -> Tensor<2> {
         let (c, g2, p) = (self.dim, self.grid * self.grid, self.patch);
         let n = g2 + 1;
-        let x = Tensor::<2>::from_data(
-            TensorData::new(patches, [batch * g2, 3 * p * p]),
-            &self.device,
-        );
-        let x = linear(x, &self.patch_embed) + self.patch_pos.clone().repeat_dim(0, batch);
-        let x = x.reshape([batch, g2, c]);
-        let cls = self.cls_pos.clone().reshape([1, 1, c]).repeat_dim(0, batch);
-        let mut x = Tensor::cat(vec![cls, x], 1).reshape([batch * n, c]);
+        let x = Tensor::<2>::from_data(TensorData::new(patches, [g2, 3 * p * p]), &self.device);
+        let x = linear(x, &self.patch_embed) + self.patch_pos.clone();
+        let mut x = Tensor::cat(vec![self.cls_pos.clone(), x], 0);
         let (h, hd) = (self.heads, HEAD_DIM);
         let scale = 1.0 / (hd as f64).sqrt();
         for b in &self.blocks {
+            // [tokens, 3 h hd] -> q, k, v of [heads, tokens, hd]
             let qkv = linear(layer_norm(x.clone(), &b.norm1), &b.qkv)
-                .reshape([batch, n, 3, h, hd])
-                .permute([2, 0, 3, 1, 4]);
-            let mut parts = qkv
-                .chunk(3, 0)
-                .into_iter()
-                .map(|t| t.reshape([batch, h, n, hd]));
+                .reshape([n, 3, h, hd])
+                .permute([1, 2, 0, 3]);
+            let mut parts = qkv.chunk(3, 0).into_iter().map(|t| t.reshape([h, n, hd]));
             let (q, k, v) = (
                 parts.next().expect("q"),
                 parts.next().expect("k"),
                 parts.next().expect("v"),
             );
-            let attn = softmax(q.matmul(k.swap_dims(2, 3)) * scale, 3);
-            let o = attn.matmul(v).swap_dims(1, 2).reshape([batch * n, c]);
+            let attn = softmax(q.matmul(k.swap_dims(1, 2)) * scale, 2);
+            let o = attn.matmul(v).swap_dims(0, 1).reshape([n, c]);
             x = x + linear(o, &b.proj) * b.ls1.clone().unsqueeze_dim(0);
             let m = gelu(linear(layer_norm(x.clone(), &b.norm2), &b.fc1));
             x = x + linear(m, &b.fc2) * b.ls2.clone().unsqueeze_dim(0);
         }
-        let x = layer_norm(x, &self.norm).reshape([batch, n, c]);
-        x.narrow(1, 0, 1).reshape([batch, c])
+        layer_norm(x, &self.norm).narrow(0, 0, 1)
     }
 }
 
@@ -461,7 +454,7 @@ impl ImageEncoder for Dinov2 {
         // One forward pass per image: a feature never depends on the batch it came in.
         let mut out = Vec::with_capacity(images.len());
         for im in images {
-            out.push(to_vec(self.forward(self.patches(im), 1)));
+            out.push(to_vec(self.forward(self.patches(im))));
         }
         Ok(out)
     }
