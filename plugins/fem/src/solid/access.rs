@@ -41,6 +41,7 @@ impl FemSolid {
             attachments: Vec::new(),
             grasps: Vec::new(),
             poses: Vec::new(),
+            poses_start: Vec::new(),
             next_id: 1,
             precond_at: None,
             precond: None,

@@ -124,6 +124,36 @@ impl FemSolid {
         Ok(())
     }
 
+    /// [`FemSolid::set_body_pose`] for a body that nodes are attached to or grasped by now: the
+    /// nodes are at this pose, so it is also where the next step starts from.
+    fn set_body_pose_now(
+        &mut self,
+        body: u32,
+        world_from_body: Isometry3<f64>,
+    ) -> Result<(), FemError> {
+        self.set_body_pose(body, world_from_body)?;
+        match self.poses_start.binary_search_by_key(&body, |p| p.0) {
+            Ok(k) => self.poses_start[k].1 = world_from_body,
+            Err(k) => self.poses_start.insert(k, (body, world_from_body)),
+        }
+        Ok(())
+    }
+
+    /// The poses a fraction `t` of the way from the start of the step to `poses` (translation
+    /// interpolated linearly, rotation spherically); a body without a start pose is at its end.
+    pub(super) fn poses_between(&self, t: f64) -> Vec<(u32, Isometry3<f64>)> {
+        self.poses
+            .iter()
+            .map(|&(b, end)| {
+                let p = match self.poses_start.binary_search_by_key(&b, |p| p.0) {
+                    Ok(k) => self.poses_start[k].1.lerp_slerp(&end, t),
+                    Err(_) => end,
+                };
+                (b, p)
+            })
+            .collect()
+    }
+
     fn pose(&self, body: u32) -> Isometry3<f64> {
         match self.poses.binary_search_by_key(&body, |p| p.0) {
             Ok(k) => self.poses[k].1,
@@ -141,7 +171,7 @@ impl FemSolid {
         nodes: &[u32],
     ) -> Result<u32, FemError> {
         self.check_nodes(nodes)?;
-        self.set_body_pose(body, world_from_body)?;
+        self.set_body_pose_now(body, world_from_body)?;
         let inv = world_from_body.inverse();
         let local = nodes
             .iter()
@@ -202,7 +232,7 @@ impl FemSolid {
                 expected: "> 0 (N), may be infinite",
             });
         }
-        self.set_body_pose(body, world_from_body)?;
+        self.set_body_pose_now(body, world_from_body)?;
         let inv = world_from_body.inverse();
         let local: Vec<Vector3<f64>> = nodes
             .iter()

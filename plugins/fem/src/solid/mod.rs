@@ -225,6 +225,11 @@ pub struct FemSolid {
     attachments: Vec<Attachment>,
     grasps: Vec<Grasp>,
     poses: Vec<(u32, Isometry3<f64>)>,
+    /// The bodies' poses at the start of the next step: where the last step left them (or where
+    /// they were when attached or grasping). A split step moves attachments and grasps from
+    /// these to `poses` in proportion (see `step_split`). Equal to `poses` between steps, so a
+    /// restored state sets it from them.
+    poses_start: Vec<(u32, Isometry3<f64>)>,
     next_id: u32,
     /// Shape at which the preconditioner is factored (`None`: rest).
     precond_at: Option<Vec<Vector3<f64>>>,

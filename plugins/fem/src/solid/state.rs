@@ -249,6 +249,7 @@ impl FemSolid {
         self.steps = steps;
         self.next_id = next_id;
         self.world = world;
+        self.poses_start.clone_from(&poses);
         self.poses = poses;
         self.attachments = attachments;
         self.grasps = grasps;

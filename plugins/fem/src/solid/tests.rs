@@ -92,3 +92,50 @@ fn a_remembered_frictionless_slide_sticks_once_the_surface_has_friction() {
     println!("slide along the push: {moved:e} m (< 1e-6)");
     assert!(moved < 1e-6);
 }
+
+#[test]
+fn a_split_step_moves_attached_nodes_in_proportion() {
+    // one Newton iteration does not meet the tolerance for the whole step, so its strict solve
+    // fails and the step is split
+    let (nodes, tets) = box_mesh(Vector3::zeros(), Vector3::new(0.2, 0.04, 0.04), [4, 1, 1]);
+    let material = Material::new(1e5, 0.35, 200.0).unwrap();
+    let config = FemConfig {
+        newton_max_iterations: 1,
+        ..FemConfig::default()
+    };
+    let mut s = FemSolid::new(&nodes, &tets, material, config).unwrap();
+    let held = s.nodes_where(|p| p.x < 1e-9);
+    s.attach_to_body(1, Isometry3::identity(), &held).unwrap();
+    let dt = 1.0 / 60.0;
+    let shift = Vector3::new(0.01, 0.0, 0.02);
+    s.set_body_pose(1, Isometry3::translation(shift.x, shift.y, shift.z))
+        .unwrap();
+    let rest = s.positions().to_vec();
+    let mut reactions = Vec::new();
+    let stats = s
+        .step(
+            dt,
+            Vector3::zeros(),
+            &crate::coupling::NoContacts,
+            &mut reactions,
+        )
+        .unwrap();
+    assert!(stats.halvings >= 1, "the step was split");
+    // each part moved the held nodes its share of the way: they end at the body's speed (all of
+    // the motion in the first part would leave them at rest in the last)
+    let speed = shift / dt;
+    for &n in &held {
+        let n = n as usize;
+        assert!((s.positions()[n] - rest[n] - shift).norm() < 1e-12);
+        let err = (s.velocities()[n] - speed).norm();
+        assert!(
+            err < 1e-9,
+            "node {n}: velocity {:?} vs the body's {speed:?}",
+            s.velocities()[n]
+        );
+    }
+    assert_eq!(
+        s.poses_start, s.poses,
+        "the next step starts where this one ended"
+    );
+}
