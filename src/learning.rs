@@ -28,11 +28,13 @@ pub const EVAL_SEED: u64 = 1_000_000;
 /// A [`VecEnv`] of state observations and continuous actions, as the learners see it.
 ///
 /// An episode that ends in an error (a physics blow-up, a non-finite action) is cut short by
-/// the simulator, not by the task: the learner sees it truncated, with the last observation
-/// before the failing step as its final observation, so the return goes on from that state's
-/// value. Counted as terminal instead, a blow-up ended the per-step penalties of the tasks'
-/// distance rewards, and PPO on Franka Drag learned to blow the belt up (19 of 20 evaluation
-/// episodes ended in errors after 25,600 steps).
+/// the simulator, not by the task. By default the learner sees it truncated, with the last
+/// observation before the failing step as its final observation, so the return goes on from
+/// that state's value. Counted as terminal without a penalty, a blow-up ended the per-step
+/// penalties of the tasks' distance rewards, and PPO on Franka Drag learned to blow the belt up
+/// (19 of 20 evaluation episodes ended in errors after 25,600 steps). With an error penalty
+/// ([`SimEnv::with_error_penalty`], the learners' `error_penalty`) it is terminal with that
+/// reward: a failure then costs more than going on, and policies learn to avoid it.
 pub struct SimEnv {
     vec: VecEnv,
     identity: String,
@@ -42,6 +44,8 @@ pub struct SimEnv {
     last_obs: Vec<f32>,
     /// Seconds spent stepping and resetting the envs (the rest of a run is the learner's).
     pub env_seconds: f64,
+    /// Reward of a terminal failure; `None`: failures truncate.
+    error_penalty: Option<f32>,
 }
 
 impl SimEnv {
@@ -76,7 +80,15 @@ impl SimEnv {
             act,
             last_obs: Vec::new(),
             env_seconds: 0.0,
+            error_penalty: None,
         })
+    }
+
+    /// Ends episodes that fail (a physics blow-up) as terminal states with reward `penalty`
+    /// instead of truncating them; `None` truncates (see [`SimEnv`]).
+    pub fn with_error_penalty(mut self, penalty: Option<f32>) -> Self {
+        self.error_penalty = penalty;
+        self
     }
 }
 
@@ -128,8 +140,17 @@ impl VecEnvironment for SimEnv {
             step.success
                 .push(info.episode.and_then(|e| e.success.map(|s| s && !e.error)));
             if info.error.is_some() {
-                step.terminated[i] = false;
-                step.truncated[i] = true;
+                match self.error_penalty {
+                    Some(penalty) => {
+                        step.terminated[i] = true;
+                        step.truncated[i] = false;
+                        step.rewards[i] = penalty;
+                    }
+                    None => {
+                        step.terminated[i] = false;
+                        step.truncated[i] = true;
+                    }
+                }
                 let before = self.last_obs.get(i * dim..(i + 1) * dim);
                 step.final_obs.push(before.map(<[f32]>::to_vec));
                 continue;
@@ -294,8 +315,9 @@ pub fn train(
         ..MakeOptions::default()
     };
     let vec = make::make_vec(&req.target, &opts, req.envs.max(1), req.threads)?;
-    let mut env =
-        SimEnv::new(vec, &req.target, req.actions.as_deref()).map_err(MakeError::Input)?;
+    let mut env = SimEnv::new(vec, &req.target, req.actions.as_deref())
+        .map_err(MakeError::Input)?
+        .with_error_penalty(cfg.error_penalty());
     let note = json!({"target": req.target, "actions": req.actions, "algo": req.algo,
                       "envs": req.envs, "command": req.command})
     .to_string();

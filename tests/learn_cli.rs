@@ -202,7 +202,8 @@ fn bad_learning_input_is_a_clear_error() {
 }
 
 #[test]
-fn an_episode_ended_by_an_error_is_a_cut_that_bootstraps_from_the_state_before() {
+fn an_episode_ended_by_an_error_is_a_cut_that_bootstraps_from_the_state_before_or_a_penalised_end()
+{
     use modesuite::learn::VecEnvironment;
     let vec = modesuite::make::make_vec(
         "MoDe-Franka-Place-v0",
@@ -224,4 +225,25 @@ fn an_episode_ended_by_an_error_is_a_cut_that_bootstraps_from_the_state_before()
     assert_eq!(s2.final_obs[0].as_deref(), Some(&s1.obs[..dim]));
     assert!(s2.final_obs[1].is_none());
     assert!(s2.obs.iter().all(|v| v.is_finite()));
+    assert_eq!(s2.rewards[0], 0.0);
+
+    // with an error penalty (the learners' `error_penalty`) the failure is terminal and costs it
+    let vec = modesuite::make::make_vec(
+        "MoDe-Franka-Place-v0",
+        &modesuite::make::MakeOptions::default(),
+        2,
+        1,
+    )
+    .unwrap();
+    let mut env = modesuite::learning::SimEnv::new(vec, "MoDe-Franka-Place-v0", None)
+        .unwrap()
+        .with_error_penalty(Some(-250.0));
+    env.reset(0).unwrap();
+    let p1 = env.step(&zero).unwrap();
+    assert_eq!(p1.obs, s1.obs);
+    let p2 = env.step(&bad).unwrap();
+    assert_eq!((p2.terminated[0], p2.truncated[0]), (true, false));
+    assert_eq!((p2.terminated[1], p2.truncated[1]), (false, false));
+    assert_eq!((p2.rewards[0], p2.rewards[1]), (-250.0, s2.rewards[1]));
+    assert_eq!(p2.final_obs[0].as_deref(), Some(&s1.obs[..dim]));
 }

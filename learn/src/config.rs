@@ -63,6 +63,14 @@ pub struct PpoConfig {
     pub bootstrap_truncation: bool,
     /// Initial log standard deviation of the state-independent policy noise (default 0).
     pub init_log_std: f32,
+    /// What an episode ended by a simulation failure (a physics blow-up) teaches. `None`
+    /// (default): it ends like a time limit, bootstrapped from the value of the last good
+    /// observation, so the failure neither costs nor pays. `Some(r)`: it ends as a terminal
+    /// state with reward `r`, so that a policy learns to avoid what breaks the simulation
+    /// (crushing a rod into a wall, say); `r` should be below the discounted return of going on
+    /// (about the worst step reward / (1 - gamma)). Applied by the simulator's training env
+    /// (`modesuite train`); set per task in its `<algo>.ron`.
+    pub error_penalty: Option<f32>,
 }
 
 impl Default for PpoConfig {
@@ -92,6 +100,7 @@ impl Default for PpoConfig {
             normalize_advantage: true,
             bootstrap_truncation: true,
             init_log_std: 0.0,
+            error_penalty: None,
         }
     }
 }
@@ -138,6 +147,14 @@ pub struct SacConfig {
     pub grad_norm: Option<f32>,
     /// Batched environment steps per logged iteration (default 1000).
     pub steps_per_iteration: usize,
+    /// What an episode ended by a simulation failure (a physics blow-up) teaches. `None`
+    /// (default): it ends like a time limit, bootstrapped from the value of the last good
+    /// observation, so the failure neither costs nor pays. `Some(r)`: it ends as a terminal
+    /// state with reward `r`, so that a policy learns to avoid what breaks the simulation
+    /// (crushing a rod into a wall, say); `r` should be below the discounted return of going on
+    /// (about the worst step reward / (1 - gamma)). Applied by the simulator's training env
+    /// (`modesuite train`); set per task in its `<algo>.ron`.
+    pub error_penalty: Option<f32>,
 }
 
 impl Default for SacConfig {
@@ -161,6 +178,7 @@ impl Default for SacConfig {
             log_std_bounds: (-5.0, 2.0),
             grad_norm: None,
             steps_per_iteration: 1000,
+            error_penalty: None,
         }
     }
 }
@@ -191,6 +209,15 @@ impl AlgoConfig {
         }
     }
 
+    /// The reward of an episode ended by a simulation failure, if such an end is terminal
+    /// (see [`PpoConfig::error_penalty`]).
+    pub fn error_penalty(&self) -> Option<f32> {
+        match self {
+            AlgoConfig::Ppo(c) => c.error_penalty,
+            AlgoConfig::Sac(c) => c.error_penalty,
+        }
+    }
+
     /// Sets the seed.
     pub fn set_seed(&mut self, seed: u64) {
         match self {
@@ -214,6 +241,7 @@ impl AlgoConfig {
                     c.bounds_loss_coef,
                     c.obs_clip,
                     c.init_log_std,
+                    c.error_penalty.unwrap_or(0.0),
                 ];
                 if floats.iter().any(|v| !v.is_finite()) || !c.learning_rate.is_finite() {
                     return bad("ppo: every number must be finite");
@@ -238,6 +266,7 @@ impl AlgoConfig {
                     c.init_alpha,
                     c.log_std_bounds.0,
                     c.log_std_bounds.1,
+                    c.error_penalty.unwrap_or(0.0),
                 ];
                 if floats.iter().any(|v| !v.is_finite())
                     || ![c.actor_lr, c.critic_lr, c.alpha_lr]
