@@ -708,6 +708,16 @@ fn robot_file_errors_name_the_file_and_the_place() {
     let volume = good.replace("finger_volume: (0.015,", "finger_volume: (0.0,");
     let e = err("volume.robot.ron", Some(&volume), "()");
     assert!(e.contains("gripper.finger_volume = (0.0, 0.04, 0.02)") && e.contains("> 0"));
+    // a camera on a link the URDF does not have, and a camera name with a '/'
+    let cam = good.replace(
+        "cameras: [(link: \"pedestal\"",
+        "cameras: [(link: \"pedestl\"",
+    );
+    let e = err("cam.robot.ron", Some(&cam), "()");
+    assert!(e.contains("cameras[0].link = \"pedestl\"") && e.contains("\"pedestal\""));
+    let cam = good.replace("cameras: [(link:", "cameras: [(name: \"a/b\", link:");
+    let e = err("camname.robot.ron", Some(&cam), "()");
+    assert!(e.contains("cameras[0].name = \"a/b\"") && e.contains("without '/'"));
     // a base mode the robot does not have
     let e = err("ped.robot.ron", None, "(base: Velocity)");
     assert!(e.contains("actions.base") && e.contains("Velocity") && e.contains(": Off"));
@@ -720,6 +730,66 @@ fn robot_file_errors_name_the_file_and_the_place() {
     let name = other.file_name().unwrap().to_string_lossy();
     let e = err(&format!("../{name}/x.robot.ron"), None, "()");
     assert!(e.contains("outside the asset roots"));
+}
+
+#[test]
+fn a_robot_file_brings_its_camera_and_a_render_section_overrides_it() {
+    use modesuite::render::RenderConfig;
+    let path = common::root().join(PEDESTAL_SCENE);
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(
+        !text.contains("\"render\""),
+        "the pedestal scene has no render section"
+    );
+    let compile = |text: &str| {
+        let source = SceneSource {
+            text: Some(text.to_string()),
+            ..SceneSource::in_memory(path.parent().unwrap())
+        };
+        let desc = modesuite::engine::scene::parse_str(text, "pedestal").unwrap();
+        let model = modesuite::make::default_app()
+            .compile_scene(&desc, &source)
+            .unwrap_or_else(|e| panic!("{e}"));
+        RenderConfig::from_scene(&model).unwrap()
+    };
+    // the robot file's unnamed camera is the robot's own: named like the scene robot
+    let cfg = compile(&text);
+    let names: Vec<&str> = cfg.cameras.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["robot"]);
+    let cam = &cfg.cameras[0];
+    assert_eq!(cam.attach.as_deref(), Some("robot/pedestal"));
+    assert_eq!(
+        (cam.width, cam.height, cam.look_at),
+        (128, 128, Some([1.2, 0.0, 0.45]))
+    );
+    // a render section's camera of the same name wins; its others come first
+    let own = text.replacen(
+        "extensions: {",
+        "extensions: {\"render\": (cameras: [(name: \"top\", width: 8, height: 8), (name: \"robot\", width: 16, height: 12)]),",
+        1,
+    );
+    let cfg = compile(&own);
+    let cams: Vec<(&str, u32)> = cfg
+        .cameras
+        .iter()
+        .map(|c| (c.name.as_str(), c.width))
+        .collect();
+    assert_eq!(cams, [("top", 8), ("robot", 16)]);
+    // the env renders it as the policy's image (`run --rgbd robot`)
+    let mut env = make(
+        path.to_str().unwrap(),
+        &MakeOptions {
+            rgbd: Some("robot".into()),
+            ..MakeOptions::default()
+        },
+    )
+    .unwrap();
+    let (obs, info) = env.reset(Some(0));
+    assert!(info.error.is_none(), "{:?}", info.error);
+    let image = &obs[obs.len() - 128 * 128 * 4..];
+    let hit = image.chunks_exact(4).filter(|p| p[3] > 0.0).count();
+    println!("pedestal camera from the robot file: {hit} of 16384 pixels hit (> 8000)");
+    assert!(hit > 8000);
 }
 
 #[test]

@@ -102,6 +102,9 @@ pub struct SectionCompileContext<'a> {
     /// Every section of the scene as written, by key (a section may read another's settings,
     /// e.g. the task section the cameras of the render section).
     pub extensions: &'a BTreeMap<String, Box<ron::value::RawValue>>,
+    /// The cameras that the sections compiled before this one bring ([`SceneSection::cameras`];
+    /// sections compile in key order, so the task section sees the robots').
+    pub mounted_cameras: &'a [CameraMount],
 }
 
 impl SectionCompileContext<'_> {
@@ -136,6 +139,33 @@ pub trait SceneSection: Send + Sync + 'static {
     fn compile(&self, ctx: &SectionCompileContext) -> Result<CompiledSection, SceneError>;
     /// Adds the section's content to an env's world (the scene's objects already exist).
     fn spawn(&self, app: &mut SimApp, compiled: &CompiledSection) -> Result<(), SceneError>;
+    /// Cameras that come with what the section spawns (a robot file's cameras), which
+    /// renderers add to the scene's own; none by default.
+    fn cameras(&self, _compiled: &CompiledSection) -> Vec<CameraMount> {
+        Vec::new()
+    }
+}
+
+/// A camera a scene section brings with what it spawns ([`SceneSection::cameras`]), such as a
+/// camera a robot file mounts on one of its links. Renderers add it to the cameras of the
+/// scene's render section, which wins where both name a camera alike.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraMount {
+    /// Camera name, unique in the scene (a robot's are `<robot name>/<camera name>`).
+    pub name: String,
+    /// What it moves with: a scene object, or a robot link as `<robot name>/<link>`.
+    pub attach: String,
+    /// `parent_from_camera` (optical frame: x right, y down, z forward).
+    pub pose: crate::scene::PoseDesc,
+    /// Aim the camera at this point of the parent frame (up = parent +z) instead of `pose`'s
+    /// rotation.
+    pub look_at: Option<[f64; 3]>,
+    /// Image width, px.
+    pub width: u32,
+    /// Image height, px.
+    pub height: u32,
+    /// Vertical field of view, degrees.
+    pub fov_y_deg: f64,
 }
 
 /// A named shape generator (RON: `Gen(name: "acme.trefoil", params: (...))`).

@@ -680,6 +680,7 @@ fn compile_inner(
         });
     }
     let mut sections = Vec::with_capacity(desc.extensions.len());
+    let mut mounted_cameras = Vec::new();
     for (key, raw) in &desc.extensions {
         let handler = registry.sections.get(key).ok_or_else(|| {
             SceneError::semantic(
@@ -700,8 +701,10 @@ fn compile_inner(
             source,
             registry,
             extensions: &desc.extensions,
+            mounted_cameras: &mounted_cameras,
         };
         let compiled = handler.compile(&ctx)?;
+        mounted_cameras.extend(handler.cameras(&compiled));
         sections.push(CompiledSceneSection {
             key: key.clone(),
             handler: handler.clone(),

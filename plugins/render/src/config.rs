@@ -357,7 +357,39 @@ impl RenderConfig {
 
     /// The render section of a compiled scene (defaults when it has none), with file positions
     /// in errors when the section can be found in the scene text.
+    /// The cameras that the scene's other sections bring (a robot file's, see
+    /// [`SceneSection::cameras`](modesuite_engine::registry::SceneSection::cameras)) follow the
+    /// section's own, except where the section has a camera of that name.
     pub fn from_scene(model: &SceneModel) -> Result<Self, SceneError> {
+        let mut cfg = Self::from_section(model)?;
+        let mounted: Vec<CameraDesc> = model
+            .sections
+            .iter()
+            .flat_map(|s| s.handler.cameras(&s.compiled))
+            .filter(|m| cfg.camera(&m.name).is_none())
+            .map(|m| CameraDesc {
+                name: m.name,
+                width: m.width,
+                height: m.height,
+                intrinsics: Intrinsics::Fov(m.fov_y_deg),
+                pose: m.pose,
+                look_at: m.look_at,
+                attach: Some(m.attach),
+                near: default_near(),
+                far: default_far(),
+                markers: false,
+                overlays: false,
+            })
+            .collect();
+        if !mounted.is_empty() {
+            cfg.cameras.extend(mounted);
+            cfg.validate()?;
+        }
+        Ok(cfg)
+    }
+
+    /// The scene's render section alone.
+    fn from_section(model: &SceneModel) -> Result<Self, SceneError> {
         let Some(raw) = model.extensions.get(EXTENSION_KEY) else {
             return Ok(Self::default());
         };

@@ -117,6 +117,89 @@ pub enum WalkingDesc {
     Trot(TrotParams),
 }
 
+/// A camera the robot carries on one of its links. Every scene with the robot gets it as if
+/// its render section listed it (unless that section has a camera of the same name): a camera
+/// without a name is the robot's own camera and takes the scene robot's name (`robot` in the
+/// task scenes: their robot camera); a named one is `<robot name>/<name>` (`robot/wrist`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraMountDesc {
+    /// Camera name within the robot (no '/'); none for the robot's own camera (at most one).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// The URDF link it moves with.
+    pub link: String,
+    /// `link_from_camera` (optical frame: x right, y down, z forward): position, m, and roll,
+    /// pitch, yaw, rad.
+    #[serde(default)]
+    pub pose: modesuite_engine::scene::PoseDesc,
+    /// Aim at this point of the link frame (up = link +z) instead of `pose`'s rotation.
+    #[serde(default)]
+    pub look_at: Option<[f64; 3]>,
+    /// Image width, px.
+    pub width: u32,
+    /// Image height, px.
+    pub height: u32,
+    /// Vertical field of view, degrees (default 60).
+    #[serde(default = "default_fov")]
+    pub fov: f64,
+}
+
+fn default_fov() -> f64 {
+    60.0
+}
+
+impl CameraMountDesc {
+    /// The checks that need no URDF; `field` is `cameras[i]`.
+    fn check(&self, file: &str, field: &str) -> Result<(), RobotError> {
+        let bad = |f: &str, value: String, expected: &str| {
+            invalid(file, format!("{field}.{f}"), value, expected)
+        };
+        if let Some(n) = self
+            .name
+            .as_ref()
+            .filter(|n| n.is_empty() || n.contains('/'))
+        {
+            return Err(bad(
+                "name",
+                format!("{n:?}"),
+                "a non-empty name without '/' (or none: the robot's own camera)",
+            ));
+        }
+        if self.link.is_empty() {
+            return Err(bad("link", "\"\"".into(), "a link of the URDF"));
+        }
+        let finite = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
+        if !(finite(&self.pose.pos) && finite(&self.pose.rpy)) {
+            return Err(bad(
+                "pose",
+                format!("{:?}", self.pose),
+                "a finite position (m) and roll, pitch, yaw (rad)",
+            ));
+        }
+        if let Some(t) = self.look_at.filter(|t| !finite(t) || *t == self.pose.pos) {
+            return Err(bad(
+                "look_at",
+                format!("{t:?}"),
+                "a finite point other than the camera's position",
+            ));
+        }
+        for (f, v) in [("width", self.width), ("height", self.height)] {
+            if !(1..=4096).contains(&v) {
+                return Err(bad(f, v.to_string(), "1..=4096 px"));
+            }
+        }
+        if !(self.fov.is_finite() && self.fov > 0.0 && self.fov < 180.0) {
+            return Err(bad(
+                "fov",
+                self.fov.to_string(),
+                "a field of view in (0, 180) degrees",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// A robot description file as written (`Robot(id: ..., ...)`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(rename = "Robot", deny_unknown_fields)]
@@ -157,6 +240,9 @@ pub struct RobotFile {
     /// The walking controller of a legged robot.
     #[serde(default)]
     pub walking: Option<WalkingDesc>,
+    /// Cameras mounted on its links (default none); see [`CameraMountDesc`].
+    #[serde(default)]
+    pub cameras: Vec<CameraMountDesc>,
 }
 
 /// A robot file built into the binary, with its URDF.
@@ -338,6 +424,16 @@ impl RobotFile {
             }
         }
         self.check_gains(file)?;
+        for (i, c) in self.cameras.iter().enumerate() {
+            c.check(file, &format!("cameras[{i}]"))?;
+            if self.cameras[..i].iter().any(|d| d.name == c.name) {
+                return Err(bad(
+                    &format!("cameras[{i}].name"),
+                    format!("{:?}", c.name),
+                    "a name no other camera of the robot has (one camera at most without)",
+                ));
+            }
+        }
         if self.physics.pgs_iterations == 0 || self.physics.substeps == 0 {
             return Err(bad(
                 "physics",

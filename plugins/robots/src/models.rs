@@ -56,6 +56,8 @@ pub struct RobotSpec {
     pub grasp_force_limit: f64,
     /// End-effector frame (tool centre point).
     pub ee_frame: String,
+    /// Cameras mounted on its links.
+    pub cameras: Vec<crate::description::CameraMountDesc>,
     /// Home pose: (joint, position) for every joint not at zero.
     pub home: Vec<(String, f64)>,
     /// Base modes it accepts, the default first.
@@ -206,6 +208,7 @@ impl RobotSpec {
             finger_volume: Vector3::new(hx, hy, hz),
             grasp_force_limit: d.gripper.grasp_force_limit,
             ee_frame: d.ee_frame,
+            cameras: d.cameras,
             home: d.home.into_iter().collect(),
             base_modes: d.actions.base,
             arm_modes: d.actions.arm,
@@ -250,7 +253,7 @@ impl RobotSpec {
     }
 
     /// Every joint the description names must be a movable joint of the URDF, the end-effector
-    /// frame one of its links.
+    /// frame and the cameras' links links of it.
     fn check_names(&self, model: &UrdfModel) -> Result<(), RobotError> {
         let movable: Vec<&str> = model
             .joints
@@ -287,13 +290,21 @@ impl RobotSpec {
                 ));
             }
         }
-        if model.link_index(&self.ee_frame).is_none() {
-            let links: Vec<&str> = model.links.iter().map(|l| l.name.as_str()).collect();
-            return Err(bad(
-                "ee_frame".into(),
-                &self.ee_frame,
-                format!("a link of {}: {links:?}", self.urdf.display()),
-            ));
+        let frames = std::iter::once(("ee_frame".to_string(), &self.ee_frame)).chain(
+            self.cameras
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (format!("cameras[{i}].link"), &c.link)),
+        );
+        for (field, link) in frames {
+            if model.link_index(link).is_none() {
+                let links: Vec<&str> = model.links.iter().map(|l| l.name.as_str()).collect();
+                return Err(bad(
+                    field,
+                    link,
+                    format!("a link of {}: {links:?}", self.urdf.display()),
+                ));
+            }
         }
         Ok(())
     }

@@ -357,7 +357,7 @@ impl TaskTerm for CameraTerm {
 pub fn camera_term(p: CameraObsDesc, cfg: &Configure) -> Result<Arc<dyn TaskTerm>, String> {
     let (w, h) = *cfg.cameras.get(&p.camera).ok_or_else(|| {
         format!(
-            "camera: \"{}\" is not a camera of the scene's render section (extensions[\"render\"].cameras): [{}]",
+            "camera: \"{}\" is not a camera of the scene (its render section's, extensions[\"render\"].cameras, or a robot file's): [{}]",
             p.camera,
             cfg.cameras.keys().cloned().collect::<Vec<_>>().join(", ")
         )

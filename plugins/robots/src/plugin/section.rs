@@ -9,7 +9,9 @@ use serde::Deserialize;
 
 use modesuite_engine::components::Object;
 use modesuite_engine::deps::ron;
-use modesuite_engine::registry::{CompiledSection, SceneSection, SectionCompileContext};
+use modesuite_engine::registry::{
+    CameraMount, CompiledSection, SceneSection, SectionCompileContext,
+};
 use modesuite_engine::scene::PoseDesc;
 use modesuite_engine::{SceneError, SimApp, Space, Spaces};
 
@@ -272,6 +274,34 @@ impl SceneSection for RobotsSection {
         };
         Ok(())
     }
+
+    fn cameras(&self, compiled: &CompiledSection) -> Vec<CameraMount> {
+        compiled
+            .downcast_ref::<Vec<CompiledRobot>>()
+            .map_or_else(Vec::new, |robots| robot_cameras(robots))
+    }
+}
+
+/// The cameras of the robots' files on `<robot name>/<link>`, named `<robot name>` (the robot's
+/// own camera) or `<robot name>/<camera>`.
+fn robot_cameras(robots: &[CompiledRobot]) -> Vec<CameraMount> {
+    robots
+        .iter()
+        .flat_map(|c| {
+            c.spec.cameras.iter().map(|m| CameraMount {
+                name: match &m.name {
+                    Some(n) => format!("{}/{n}", c.desc.name),
+                    None => c.desc.name.clone(),
+                },
+                attach: format!("{}/{}", c.desc.name, m.link),
+                pose: m.pose,
+                look_at: m.look_at,
+                width: m.width,
+                height: m.height,
+                fov_y_deg: m.fov,
+            })
+        })
+        .collect()
 }
 
 fn check_script(path: &str, s: &Script) -> Result<(), SceneError> {

@@ -12,25 +12,28 @@ use crate::desc::{EventDesc, TaskDesc};
 use crate::events::{TaskEvent, TaskEventEntry};
 use crate::terms::{configure_any, Configure, TaskTerm};
 
-/// The cameras of the scene's render section: name -> (width, height).
+/// The cameras of the scene: its render section's and those other sections bring (a robot
+/// file's), the render section's first: name -> (width, height).
 pub(super) fn scene_cameras(
     ctx: &SectionCompileContext,
 ) -> Result<BTreeMap<String, (u32, u32)>, SceneError> {
-    let Some(text) = ctx.extension(modesuite_render::config::EXTENSION_KEY) else {
-        return Ok(BTreeMap::new());
-    };
     // The render section reports its own errors with their place; an unreadable one leaves
-    // no cameras here.
-    let cfg: Option<modesuite_render::RenderConfig> =
-        modesuite_engine::scene::ron_options().from_str(text).ok();
-    Ok(cfg
+    // no cameras of its own here.
+    let cfg: Option<modesuite_render::RenderConfig> = ctx
+        .extension(modesuite_render::config::EXTENSION_KEY)
+        .and_then(|text| modesuite_engine::scene::ron_options().from_str(text).ok());
+    let mut cameras: BTreeMap<String, (u32, u32)> = cfg
         .map(|c| {
             c.cameras
                 .iter()
                 .map(|c| (c.name.clone(), (c.width, c.height)))
                 .collect()
         })
-        .unwrap_or_default())
+        .unwrap_or_default();
+    for m in ctx.mounted_cameras {
+        cameras.entry(m.name.clone()).or_insert((m.width, m.height));
+    }
+    Ok(cameras)
 }
 
 /// Checks that an event's `object` is in the scene; a robot link (`robot/link`, spawned by the
