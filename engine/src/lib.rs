@@ -38,6 +38,7 @@ pub mod deformable;
 pub mod dump;
 pub mod dynamic;
 pub mod env;
+pub mod events;
 pub mod fsio;
 pub mod math;
 pub mod registry;

@@ -2,16 +2,17 @@
 //! by [`Exported`] (which [`declare_plugin!`](crate::declare_plugin) calls).
 //!
 //! Authors write plain functions over safe views ([`World`], [`Object`], [`TermContext`],
-//! [`ForceContext`]); the callbacks exported to the host catch panics, check UTF-8 and lengths,
+//! [`ForceContext`], [`EventContext`]); the callbacks exported to the host catch panics, check UTF-8 and lengths,
 //! and report errors as messages.
 
 use std::ffi::c_void;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use crate::{
-    caps, AbiStr, ForceCall, ForceDecl, MeshSink, ObjectView, PluginDecl, ShapeDecl, TermCall,
-    TermDecl, TextSink, WorldView, ABI_VERSION, MESH_SURFACE, MESH_VOLUME, STATUS_ERROR, STATUS_OK,
-    STATUS_PANIC, TERM_OBSERVATION, TERM_REWARD, TERM_TERMINATION,
+    caps, AbiStr, EventCall, EventDecl, EventHost, ForceCall, ForceDecl, MeshSink, ObjectView,
+    PluginDecl, ShapeDecl, TermCall, TermDecl, TextSink, WorldView, ABI_VERSION, MESH_SURFACE,
+    MESH_VOLUME, STATUS_ERROR, STATUS_OK, STATUS_PANIC, TERM_OBSERVATION, TERM_REWARD,
+    TERM_TERMINATION,
 };
 
 /// Which mesh the host asks a generator for.
@@ -108,6 +109,112 @@ pub struct ForceDef {
     pub apply: fn(ctx: &mut ForceContext) -> Result<(), String>,
 }
 
+/// A task event: `Event(event: "name", params: (...))` in a task section.
+pub struct EventDef {
+    /// Registry name.
+    pub name: &'static str,
+    /// One line for `modesuite list`.
+    pub description: &'static str,
+    /// Validates the RON parameters when the scene is compiled; returns whether the event
+    /// moves no body (then a task may also run it during episodes, `Interval`).
+    pub configure: fn(params: &str) -> Result<bool, String>,
+    /// Applies the event to one environment.
+    pub apply: fn(ctx: &mut EventContext) -> Result<(), String>,
+}
+
+/// What an event's `apply` gets: its parameters and what it may do to the environment.
+pub struct EventContext<'a> {
+    /// The event's RON parameters from the task section (validated by `configure`).
+    pub params: &'a str,
+    /// The event's key in the task's `events` map.
+    pub name: &'a str,
+    host: &'a EventHost,
+}
+
+impl EventContext<'_> {
+    /// A uniform number in `[lo, hi)` from the environment's random stream: draw everything
+    /// from here so that episodes stay reproducible.
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        (self.host.uniform)(self.host.ctx, lo, hi)
+    }
+
+    /// Adds `dv` (m/s, world frame) to every free node of a deformable object or to a free
+    /// dynamic rigid body.
+    pub fn push(&mut self, object: &str, dv: [f64; 3]) -> Result<(), String> {
+        let mut msg = String::new();
+        let status = (self.host.push)(
+            self.host.ctx,
+            AbiStr::new(object),
+            dv.as_ptr(),
+            &message_sink(&mut msg),
+        );
+        host_result(status, msg)
+    }
+
+    /// Moves a deformable object rigidly: translation (m) and unit quaternion (x, y, z, w),
+    /// world frame.
+    pub fn move_object(
+        &mut self,
+        object: &str,
+        translation: [f64; 3],
+        rotation: [f64; 4],
+    ) -> Result<(), String> {
+        let [x, y, z] = translation;
+        let [qx, qy, qz, qw] = rotation;
+        let pose = [x, y, z, qx, qy, qz, qw];
+        let mut msg = String::new();
+        let status = (self.host.move_object)(
+            self.host.ctx,
+            AbiStr::new(object),
+            pose.as_ptr(),
+            &message_sink(&mut msg),
+        );
+        host_result(status, msg)
+    }
+
+    /// Sets the friction coefficient of every collider of a rigid object.
+    pub fn set_friction(&mut self, object: &str, friction: f64) -> Result<(), String> {
+        let mut msg = String::new();
+        let status = (self.host.set_friction)(
+            self.host.ctx,
+            AbiStr::new(object),
+            friction,
+            &message_sink(&mut msg),
+        );
+        host_result(status, msg)
+    }
+}
+
+extern "C" fn append_message(ctx: *mut c_void, text: AbiStr) {
+    if ctx.is_null() {
+        return;
+    }
+    // SAFETY: `ctx` is the `String` `message_sink` borrowed for the host call.
+    let out = unsafe { &mut *ctx.cast::<String>() };
+    // SAFETY: the host passes a string valid during this call.
+    if let Ok(t) = unsafe { text.as_str() } {
+        out.push_str(t);
+    }
+}
+
+/// A sink appending the host's message to `out` (valid while `out` is borrowed).
+fn message_sink(out: &mut String) -> TextSink {
+    TextSink {
+        ctx: (out as *mut String).cast(),
+        write: append_message,
+    }
+}
+
+fn host_result(status: i32, message: String) -> Result<(), String> {
+    if status == STATUS_OK {
+        Ok(())
+    } else if message.is_empty() {
+        Err(format!("the host refused (status {status})"))
+    } else {
+        Err(message)
+    }
+}
+
 /// A whole plugin.
 pub struct PluginDef {
     /// Plugin name, unique among loaded plugins (prefix of its registry names by convention).
@@ -122,6 +229,8 @@ pub struct PluginDef {
     pub terms: Vec<TermDef>,
     /// Passive forces.
     pub forces: Vec<ForceDef>,
+    /// Task events.
+    pub events: Vec<EventDef>,
 }
 
 /// One object of the world (read-only).
@@ -456,6 +565,47 @@ extern "C" fn force_apply(user: *const c_void, call: *const ForceCall) -> i32 {
     })
 }
 
+extern "C" fn event_configure(
+    user: *const c_void,
+    params: AbiStr,
+    interval_safe: *mut u32,
+    error: *const TextSink,
+) -> i32 {
+    guarded(error, || {
+        // SAFETY: `user` was set by `Exported::new` to an `EventDef` leaked for the process.
+        let def = unsafe { &*user.cast::<EventDef>() };
+        let safe = (def.configure)(text(params, "parameters")?)?;
+        if interval_safe.is_null() {
+            return Err("no place for interval_safe".into());
+        }
+        // SAFETY: a non-null pointer comes from the host and is writable during the call.
+        unsafe { *interval_safe = u32::from(safe) };
+        Ok(())
+    })
+}
+
+extern "C" fn event_apply(user: *const c_void, call: *const EventCall) -> i32 {
+    if call.is_null() {
+        return STATUS_ERROR;
+    }
+    // SAFETY: a non-null call comes from the host and is valid during the call.
+    let call = unsafe { &*call };
+    guarded(&call.error, || {
+        // SAFETY: `user` was set by `Exported::new` to an `EventDef` leaked for the process.
+        let def = unsafe { &*user.cast::<EventDef>() };
+        if call.host.is_null() {
+            return Err("no event host".into());
+        }
+        let mut ctx = EventContext {
+            params: text(call.params, "parameters")?,
+            name: text(call.name, "event name")?,
+            // SAFETY: the host's functions are valid during the call.
+            host: unsafe { &*call.host },
+        };
+        (def.apply)(&mut ctx)
+    })
+}
+
 /// A plugin turned into its C declaration, kept for the life of the process.
 ///
 /// Holds the address of a leaked [`PluginDecl`] (as an integer, so the value can live in a
@@ -490,6 +640,9 @@ fn export(def: PluginDef) -> *const PluginDecl {
     }
     if !def.forces.is_empty() {
         capabilities |= caps::PASSIVE_FORCE;
+    }
+    if !def.events.is_empty() {
+        capabilities |= caps::EVENT;
     }
     for t in &def.terms {
         capabilities |= match t.kind {
@@ -535,7 +688,19 @@ fn export(def: PluginDef) -> *const PluginDecl {
             apply: Some(force_apply),
         })
         .collect();
+    let events: Vec<EventDecl> = def
+        .events
+        .iter()
+        .map(|e| EventDecl {
+            name: AbiStr::new(e.name),
+            description: AbiStr::new(e.description),
+            user: (e as *const EventDef).cast(),
+            configure: Some(event_configure),
+            apply: Some(event_apply),
+        })
+        .collect();
     let (shapes, n_shapes) = leak_slice(shapes);
+    let (events, n_events) = leak_slice(events);
     let (terms, n_terms) = leak_slice(terms);
     let (forces, n_forces) = leak_slice(forces);
     Box::leak(Box::new(PluginDecl {
@@ -550,6 +715,8 @@ fn export(def: PluginDef) -> *const PluginDecl {
         n_terms,
         forces,
         n_forces,
+        events,
+        n_events,
     }))
 }
 
@@ -584,6 +751,7 @@ mod tests {
                 TermDef::scalar("t.count", "counts", TermKind::Termination, count),
             ],
             forces: vec![],
+            events: vec![],
         }
     }
 

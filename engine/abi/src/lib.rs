@@ -31,6 +31,9 @@
 //! - **Passive force on deformables** ([`ForceDecl`]): called every substep for each deformable
 //!   object the scene applies it to, with the object's current nodes (and velocities when the
 //!   solver has them); it adds forces (N, world frame) into a zeroed host buffer.
+//! - **Task events** ([`EventDecl`], since version 2): a task section runs them at reset, at
+//!   startup or on an interval; they draw from the environment's random stream and push, move
+//!   or re-rub objects through host functions ([`EventHost`]).
 //!
 //! ## State, errors, panics
 //!
@@ -68,6 +71,7 @@
 //!         shapes: vec![],
 //!         terms: vec![TermDef::scalar("acme.height", "height of the box, m", TermKind::Reward, height)],
 //!         forces: vec![],
+//!         events: vec![],
 //!     }
 //! }
 //!
@@ -84,7 +88,7 @@ use std::ffi::c_void;
 pub mod guest;
 
 /// The version of this ABI. A host loads only plugins built against the same number.
-pub const ABI_VERSION: u32 = 1;
+pub const ABI_VERSION: u32 = 2;
 
 /// Name of the `u32` static holding the plugin's ABI version (read before anything else).
 pub const VERSION_SYMBOL: &str = "MODESUITE_PLUGIN_ABI_VERSION";
@@ -107,9 +111,11 @@ pub mod caps {
     pub const TERMINATION_TERM: u64 = 1 << 3;
     /// The plugin declares passive forces on deformables.
     pub const PASSIVE_FORCE: u64 = 1 << 4;
+    /// The plugin declares task events (since version 2).
+    pub const EVENT: u64 = 1 << 5;
     /// Every bit this version knows.
     pub const ALL: u64 =
-        SHAPE_GENERATOR | OBSERVATION_TERM | REWARD_TERM | TERMINATION_TERM | PASSIVE_FORCE;
+        SHAPE_GENERATOR | OBSERVATION_TERM | REWARD_TERM | TERMINATION_TERM | PASSIVE_FORCE | EVENT;
 }
 
 /// The call succeeded.
@@ -352,6 +358,77 @@ pub struct ForceDecl {
     pub apply: Option<extern "C" fn(user: *const c_void, call: *const ForceCall) -> i32>,
 }
 
+/// What an event may do to one environment: host functions, valid during the call. Every
+/// function that can fail returns a status and writes its message to `error`.
+#[repr(C)]
+pub struct EventHost {
+    /// Host context, passed back to the functions.
+    pub ctx: *mut c_void,
+    /// A uniform number in `[lo, hi)` from the environment's random stream (draw everything
+    /// from here, so episodes stay reproducible).
+    pub uniform: extern "C" fn(ctx: *mut c_void, lo: f64, hi: f64) -> f64,
+    /// Adds the velocity `dv` (3 f64, m/s, world frame) to every free node of a deformable
+    /// object, or to a free dynamic rigid body.
+    pub push: extern "C" fn(
+        ctx: *mut c_void,
+        object: AbiStr,
+        dv: *const f64,
+        error: *const TextSink,
+    ) -> i32,
+    /// Moves a deformable object rigidly by `pose` (7 f64: x, y, z, then the unit quaternion
+    /// x, y, z, w; world frame).
+    pub move_object: extern "C" fn(
+        ctx: *mut c_void,
+        object: AbiStr,
+        pose: *const f64,
+        error: *const TextSink,
+    ) -> i32,
+    /// Sets the friction coefficient of every collider of a rigid object.
+    pub set_friction: extern "C" fn(
+        ctx: *mut c_void,
+        object: AbiStr,
+        friction: f64,
+        error: *const TextSink,
+    ) -> i32,
+}
+
+/// Arguments of [`EventDecl::apply`] (valid during the call).
+#[repr(C)]
+pub struct EventCall {
+    /// The event's parameters from the task section, RON text.
+    pub params: AbiStr,
+    /// The event's key in the task's `events` map.
+    pub name: AbiStr,
+    /// What the event may do.
+    pub host: *const EventHost,
+    /// Where an error message goes.
+    pub error: TextSink,
+}
+
+/// A task event (a task section's `Event(event: "...", params: (...))`, at reset, at startup or
+/// on an interval): randomises or perturbs one environment through [`EventHost`].
+#[repr(C)]
+pub struct EventDecl {
+    /// Registry name, e.g. `acme.nudge`.
+    pub name: AbiStr,
+    /// One line for `modesuite list`.
+    pub description: AbiStr,
+    /// Plugin context, passed back to the functions.
+    pub user: *const c_void,
+    /// Validates the parameters (once, when a scene is compiled) and writes to `interval_safe`
+    /// 1 when the event moves no body (so a task may also run it during episodes), else 0.
+    pub configure: Option<
+        extern "C" fn(
+            user: *const c_void,
+            params: AbiStr,
+            interval_safe: *mut u32,
+            error: *const TextSink,
+        ) -> i32,
+    >,
+    /// Applies the event to one environment.
+    pub apply: Option<extern "C" fn(user: *const c_void, call: *const EventCall) -> i32>,
+}
+
 /// What the entry function returns: everything the plugin provides. Must stay valid and
 /// unchanged for the life of the process (the host never unloads a plugin).
 #[repr(C)]
@@ -378,6 +455,10 @@ pub struct PluginDecl {
     pub forces: *const ForceDecl,
     /// Number of passive forces.
     pub n_forces: usize,
+    /// Task events (since version 2).
+    pub events: *const EventDecl,
+    /// Number of task events.
+    pub n_events: usize,
 }
 
 /// Exports a plugin: `declare_plugin!(make)` where `make` is a `fn() -> guest::PluginDef`.

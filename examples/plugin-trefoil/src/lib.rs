@@ -12,15 +12,17 @@
 //!   (keeps the previous height in the plugin's state slots, so it is reset with the env);
 //! - the observation term `acme.centroid`: the centroid (x, y, z), m;
 //! - the termination term `acme.below`: 1 when the centroid is below a height;
-//! - the passive force `acme.wind`: a uniform force spread over the nodes, plus linear drag.
+//! - the passive force `acme.wind`: a uniform force spread over the nodes, plus linear drag;
+//! - the task event `acme.nudge`: pushes an object with a random horizontal velocity (a task
+//!   section's `Event(event: "acme.nudge", params: (object, speed))`, at reset or on an interval).
 //!
 //! See README.md for how to write such a plugin.
 
 pub mod trefoil;
 
 use modesuite_plugin_abi::guest::{
-    ForceContext, ForceDef, Mesh, MeshWant, PluginDef, ShapeDef, TermContext, TermDef, TermKind,
-    World,
+    EventContext, EventDef, ForceContext, ForceDef, Mesh, MeshWant, PluginDef, ShapeDef,
+    TermContext, TermDef, TermKind, World,
 };
 use serde::Deserialize;
 
@@ -149,11 +151,40 @@ fn wind(ctx: &mut ForceContext) -> Result<(), String> {
     Ok(())
 }
 
+/// Parameters of `acme.nudge`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NudgeParams {
+    /// The object to push.
+    object: String,
+    /// Largest horizontal speed, m/s: each component of the push is uniform in [-speed, speed].
+    speed: f64,
+}
+
+fn configure_nudge(params: &str) -> Result<bool, String> {
+    let p: NudgeParams = parse(params)?;
+    if !(p.speed.is_finite() && p.speed >= 0.0) {
+        return Err(format!(
+            "speed = {}: expected a finite speed >= 0, m/s",
+            p.speed
+        ));
+    }
+    // a push moves no body by itself: fine during episodes too
+    Ok(true)
+}
+
+fn nudge(ctx: &mut EventContext) -> Result<(), String> {
+    let p: NudgeParams = parse(ctx.params)?;
+    let vx = ctx.uniform(-p.speed, p.speed);
+    let vy = ctx.uniform(-p.speed, p.speed);
+    ctx.push(&p.object, [vx, vy, 0.0])
+}
+
 /// The plugin's declaration.
 pub fn plugin() -> PluginDef {
     PluginDef {
         name: "acme",
-        description: "example compiled plugin: trefoil-knot tube, centroid terms, wind",
+        description: "example compiled plugin: trefoil-knot tube, centroid terms, wind, nudge",
         state_len: 2,
         shapes: vec![ShapeDef {
             name: "acme.trefoil",
@@ -195,6 +226,12 @@ pub fn plugin() -> PluginDef {
             description: "uniform force spread over the nodes plus linear drag (params: force, drag)",
             configure: configure_wind,
             apply: wind,
+        }],
+        events: vec![EventDef {
+            name: "acme.nudge",
+            description: "pushes an object with a random horizontal velocity (params: object, speed)",
+            configure: configure_nudge,
+            apply: nudge,
         }],
     }
 }

@@ -4,9 +4,12 @@
 //! `Interval(...)`, like the built-in events. The event is configured once when the scene
 //! compiles (its parameter errors are located there) and applied through an [`EventCtx`]: the
 //! env's random stream, pushes, rigid moves of deformables and friction, by object name.
+//! Engine events ([`modesuite_engine::events`], which compiled plugins declare through the C
+//! ABI) run the same way: [`EventCtx`] is their [`EventWorld`].
 
 use std::sync::Arc;
 
+use modesuite_engine::events::{ConfiguredEvent, EventWorld};
 use modesuite_engine::registry::{TermEntry, TermKind};
 use modesuite_engine::SimApp;
 use nalgebra::{Isometry3, Vector3};
@@ -68,6 +71,36 @@ impl EventCtx<'_> {
     /// The task's robot.
     pub fn robot(&self) -> &str {
         self.robot
+    }
+}
+
+/// An engine event ([`modesuite_engine::events`]: a compiled plugin's, or one registered with
+/// `TermEntry::event`) run as a task event: it acts through the same [`EventCtx`].
+pub(crate) struct EngineEvent(pub(crate) Arc<dyn ConfiguredEvent>);
+
+impl TaskEvent for EngineEvent {
+    fn interval_safe(&self) -> bool {
+        self.0.interval_safe()
+    }
+
+    fn apply(&self, ctx: &mut EventCtx) -> Result<(), String> {
+        let name = ctx.event.to_string();
+        self.0.apply(&name, ctx)
+    }
+}
+
+impl EventWorld for EventCtx<'_> {
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        EventCtx::uniform(self, lo, hi)
+    }
+    fn push(&mut self, object: &str, dv: Vector3<f64>) -> Result<(), String> {
+        EventCtx::push(self, object, dv)
+    }
+    fn move_object(&mut self, object: &str, iso: &Isometry3<f64>) -> Result<(), String> {
+        EventCtx::move_object(self, object, iso)
+    }
+    fn set_friction(&mut self, object: &str, friction: f64) -> Result<(), String> {
+        EventCtx::set_friction(self, object, friction)
     }
 }
 

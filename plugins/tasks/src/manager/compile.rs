@@ -9,8 +9,9 @@ use modesuite_engine::registry::SectionCompileContext;
 use modesuite_engine::scene::SceneError;
 
 use crate::desc::{EventDesc, TaskDesc};
-use crate::events::{TaskEvent, TaskEventEntry};
+use crate::events::{EngineEvent, TaskEvent, TaskEventEntry};
 use crate::terms::{configure_any, Configure, TaskTerm};
+use modesuite_engine::events::EventEntry;
 
 /// The cameras of the scene: its render section's and those other sections bring (a robot
 /// file's), the render section's first: name -> (width, height).
@@ -79,11 +80,14 @@ pub(super) fn check_event(
 ) -> Result<Option<Arc<dyn TaskEvent>>, SceneError> {
     match e {
         EventDesc::Event { event, params } => {
+            let is_event = |t: &modesuite_engine::registry::TermEntry| {
+                t.payload.is::<TaskEventEntry>() || t.payload.is::<EventEntry>()
+            };
             let entry = ctx
                 .registry
                 .terms
                 .get(event)
-                .and_then(|t| t.payload.downcast_ref::<TaskEventEntry>())
+                .filter(|t| is_event(t))
                 .ok_or_else(|| {
                     serr(
                         &format!("{epath}.event"),
@@ -93,7 +97,7 @@ pub(super) fn check_event(
                             ctx.registry
                                 .terms
                                 .iter()
-                                .filter(|(_, t)| t.payload.is::<TaskEventEntry>())
+                                .filter(|(_, t)| is_event(t))
                                 .map(|(n, _)| n.as_str())
                                 .collect::<Vec<_>>()
                                 .join(", ")
@@ -101,10 +105,18 @@ pub(super) fn check_event(
                     )
                 })?;
             let ron = params.as_ref().map_or("()", |p| p.get_ron());
-            let configured = entry
-                .0
-                .configure(ron, cfg)
-                .map_err(|m| serr(&format!("{epath}.params"), ron.trim(), m))?;
+            let configured = match entry.payload.downcast_ref::<TaskEventEntry>() {
+                Some(task_event) => task_event.0.configure(ron, cfg),
+                // an engine event (a compiled plugin's, or a static plugin's through
+                // `TermEntry::event`)
+                None => entry
+                    .payload
+                    .downcast_ref::<EventEntry>()
+                    .ok_or_else(|| "not an event".to_string())
+                    .and_then(|e| e.0.configure(ron))
+                    .map(|e| Arc::new(EngineEvent(e)) as Arc<dyn TaskEvent>),
+            }
+            .map_err(|m| serr(&format!("{epath}.params"), ron.trim(), m))?;
             if wrapper == Some("Interval") && !configured.interval_safe() {
                 return Err(serr(
                     &format!("{epath}.event"),

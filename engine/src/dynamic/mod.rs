@@ -16,7 +16,8 @@
 //! - A loaded library is never unloaded (it is leaked), so every pointer it gave stays valid.
 //!
 //! Registered capabilities join the same registries as static plugins ([`crate::registry`]):
-//! shape generators, terms ([`crate::terms::Term`]) and passive forces. The plugin's state slots
+//! shape generators, terms ([`crate::terms::Term`]), passive forces and task events
+//! ([`crate::events`]). The plugin's state slots
 //! live in [`crate::state::PluginStates`] under the plugin's name, so snapshots, resets and determinism hashes
 //! cover them. Callbacks may run on several threads at once (one per env).
 
@@ -26,6 +27,8 @@ use std::sync::Arc;
 
 use modesuite_plugin_abi as abi;
 use nalgebra::Vector3;
+
+mod events;
 
 use crate::registry::{ShapeGenerator, TermEntry, TermKind};
 use crate::shapes::{GeneratedMesh, MeshKind, SurfaceMesh, VolumeMesh, MAX_ELEMENTS};
@@ -473,6 +476,8 @@ pub struct DynamicPlugin {
     shapes: Vec<Arc<DynShape>>,
     terms: Vec<(String, String, Arc<DynTerm>)>,
     forces: Vec<Arc<DynForce>>,
+    /// Task events: name, description, event.
+    events: Vec<(String, String, Arc<events::DynEvent>)>,
 }
 
 impl std::fmt::Debug for DynamicPlugin {
@@ -686,6 +691,27 @@ impl DynamicPlugin {
                 name: n,
             }));
         }
+        let mut events = Vec::new();
+        for (i, e) in decl_slice(decl.events, decl.n_events, "events")?
+            .iter()
+            .enumerate()
+        {
+            let n = decl_name(e.name, &format!("events[{i}].name"))?;
+            unique(&n)?;
+            caps |= abi::caps::EVENT;
+            let event = events::DynEvent {
+                plugin: name.clone(),
+                user: UserPtr(e.user),
+                configure: e
+                    .configure
+                    .ok_or_else(|| format!("events[{i}] {n:?}: no configure function"))?,
+                apply: e
+                    .apply
+                    .ok_or_else(|| format!("events[{i}] {n:?}: no apply function"))?,
+            };
+            let description = decl_str(e.description, &format!("events[{i}].description"))?;
+            events.push((n, description, Arc::new(event)));
+        }
         if caps != decl.capabilities {
             return Err(format!(
                 "capability bits {:#x} do not match what it declares ({caps:#x})",
@@ -700,6 +726,7 @@ impl DynamicPlugin {
             shapes,
             terms,
             forces,
+            events,
         }))
     }
 
@@ -723,13 +750,14 @@ impl DynamicPlugin {
         self.state_len
     }
 
-    /// Every registry name it declares (generators, terms, forces).
+    /// Every registry name it declares (generators, terms, forces, events).
     pub fn names(&self) -> Vec<String> {
         self.shapes
             .iter()
             .map(|s| s.name.clone())
             .chain(self.terms.iter().map(|t| t.0.clone()))
             .chain(self.forces.iter().map(|f| f.name.clone()))
+            .chain(self.events.iter().map(|e| e.0.clone()))
             .collect()
     }
 }
@@ -756,6 +784,13 @@ impl Plugin for DynamicPlugin {
         }
         for f in &self.forces {
             app.register_passive_force(Arc::new(f.clone()));
+        }
+        for (name, description, event) in &self.events {
+            app.register_term(TermEntry::event(
+                name.clone(),
+                description.clone(),
+                Arc::new(event.clone()),
+            ));
         }
     }
 }
