@@ -2,7 +2,7 @@
 //! Gymnasium's checker and users rely on that).
 
 use numpy::ndarray::{ArrayD, IxDyn};
-use numpy::{Element, IntoPyArray, PyArray1};
+use numpy::{Element, IntoPyArray, PyArray1, PyReadonlyArrayDyn};
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -10,6 +10,17 @@ use pyo3::IntoPyObjectExt;
 
 use modesuite::gym::info::{Batch, ColumnData, Info, InfoValue};
 use modesuite::gym::layout::{convert, ObsLayout, OutBuf};
+
+/// Any array-like of numbers (float64, a strided view, a list) as a C-ordered float32 array:
+/// `numpy.ascontiguousarray(a, dtype=float32)`, which copies only when it has to.
+pub fn f32_array<'py>(a: &Bound<'py, PyAny>) -> PyResult<PyReadonlyArrayDyn<'py, f32>> {
+    let py = a.py();
+    let kwargs = PyDict::new(py);
+    kwargs.set_item("dtype", "float32")?;
+    py.import("numpy")?
+        .call_method("ascontiguousarray", (a,), Some(&kwargs))?
+        .extract()
+}
 
 /// A fresh array of `data` with `shape`.
 pub fn array<T: Element>(py: Python<'_>, data: Vec<T>, shape: &[usize]) -> PyResult<Py<PyAny>> {

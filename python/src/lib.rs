@@ -17,9 +17,7 @@ mod encoder;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use numpy::{
-    PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods,
-};
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyNotImplementedError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
@@ -602,8 +600,10 @@ impl Policy {
         })
     }
 
-    /// Actions (float32) for observations: one `(obs_dim,)` or a batch `(n, obs_dim)`.
-    fn act<'py>(&self, py: Python<'py>, obs: PyReadonlyArrayDyn<'py, f32>) -> PyResult<Py<PyAny>> {
+    /// Actions (float32) for observations: one `(obs_dim,)` or a batch `(n, obs_dim)`, any
+    /// numeric array (float64, a strided view: converted to C-ordered float32 first).
+    fn act<'py>(&self, py: Python<'py>, obs: &Bound<'py, PyAny>) -> PyResult<Py<PyAny>> {
+        let obs = convert::f32_array(obs)?;
         let shape = obs.shape().to_vec();
         let (rows, dim) = match shape.as_slice() {
             [d] => (None, *d),

@@ -81,6 +81,15 @@ def test_a_shipped_trained_policy_solves_its_task(root: Path) -> None:
     assert info["ended"] == "success"
     batch = policy.act(np.zeros((3, policy.obs_dim), np.float32))
     assert batch.shape == (3, policy.act_dim)
+    # any numeric array: float64, a strided view, a list, all as their float32 values
+    rows = np.random.default_rng(0).normal(size=(3, policy.obs_dim)).astype(np.float32)
+    want = policy.act(rows)
+    wide = np.zeros((3, 2 * policy.obs_dim), np.float32)
+    wide[:, ::2] = rows
+    assert np.array_equal(policy.act(wide[:, ::2]), want)
+    assert np.array_equal(policy.act(rows.astype(np.float64)), want)
+    assert np.array_equal(policy.act(np.asfortranarray(rows)), want)
+    assert np.array_equal(policy.act(rows[1].tolist()), want[1])
     with pytest.raises(ValueError, match="expected"):
         policy.act(np.zeros(policy.obs_dim + 1, np.float32))
     with pytest.raises(modesuite.SceneError, match="not a policy folder"):
