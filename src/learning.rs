@@ -446,15 +446,29 @@ pub fn load_run_policy(
         ));
     }
     let policy = modesuite_learn::Policy::load(&pdir).map_err(|e| e.to_string())?;
-    Ok((Box::new(LearnedPolicy { policy, inputs }), origin))
+    Ok((Box::new(LearnedPolicy::new(policy, inputs)), origin))
 }
 
-/// A learned policy acting in one env (`run --policy DIR`, `eval`).
+/// A learned policy acting in one env (`run --policy DIR`, `eval`). A policy of action chunks
+/// plays each chunk to its end before it observes again.
 pub struct LearnedPolicy {
     /// The network.
     pub policy: modesuite_learn::Policy,
     /// What it observes.
     pub inputs: Observer,
+    /// The rest of the current chunk, next action first.
+    pending: std::collections::VecDeque<Vec<f32>>,
+}
+
+impl LearnedPolicy {
+    /// `policy` observing `inputs`.
+    pub fn new(policy: modesuite_learn::Policy, inputs: Observer) -> Self {
+        Self {
+            policy,
+            inputs,
+            pending: std::collections::VecDeque::new(),
+        }
+    }
 }
 
 /// Acts in `env` with `f`, a function of the input vector ([`Observer`]) of a policy that takes
@@ -481,15 +495,24 @@ pub fn act_on_inputs(
 }
 
 impl modesuite_tasks::expert::Policy for LearnedPolicy {
+    fn reset(&mut self, _seed: u64) {
+        self.pending.clear();
+    }
+
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
+        if let Some(next) = self.pending.pop_front() {
+            action.copy_from_slice(&next);
+            return Ok(());
+        }
         let p = &self.policy;
-        act_on_inputs(
-            &mut self.inputs,
-            env,
-            action,
-            p.obs_dim(),
-            p.act_dim(),
-            |o| p.act(o),
-        )
+        let ad = p.act_dim();
+        let mut chunk = Vec::new();
+        act_on_inputs(&mut self.inputs, env, action, p.obs_dim(), ad, |o| {
+            chunk = p.act_chunk(o);
+            chunk[..ad].to_vec()
+        })?;
+        self.pending
+            .extend(chunk.chunks_exact(ad).skip(1).map(<[f32]>::to_vec));
+        Ok(())
     }
 }

@@ -157,7 +157,33 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     let (_, chunked) = retrieval_run(TASK, &data, &h, &["--set", "horizon=5"], "7");
     println!("retrieval with horizon 5: {chunked}");
     assert_eq!(chunked["return"], recorded["return"]);
-    for d in [data, a, b, r, h] {
+    // BC with action chunks (5 actions per look, played before the next look) overfits it too
+    let c = scratch("c");
+    let (d, co) = (data.to_str().unwrap(), c.to_str().unwrap());
+    ok(cli(&[
+        "train",
+        TASK,
+        "--algo",
+        "bc",
+        "--dataset",
+        d,
+        "--out",
+        co,
+        "--seed",
+        "1",
+        "--set",
+        "epochs=1500",
+        "--set",
+        "chunk=5",
+    ]));
+    let run = ok(cli(&["run", TASK, "--policy", co, "--seed", "7", "--json"]));
+    let summary: serde_json::Value = serde_json::from_str(run.lines().last().unwrap()).unwrap();
+    println!(
+        "BC with chunks of 5 from the demonstration's seed: {}",
+        run.lines().next().unwrap()
+    );
+    assert_eq!(summary["success_rate"], 1.0, "{run}");
+    for d in [data, a, b, r, h, c] {
         let _ = std::fs::remove_dir_all(d);
     }
 }

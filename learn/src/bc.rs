@@ -45,6 +45,11 @@ pub struct BcConfig {
     pub seed: u64,
     /// Normalised observations are clipped to +-this.
     pub obs_clip: f64,
+    /// Actions predicted per observation (action chunking, continuous actions only): the
+    /// network learns the next `chunk` actions of the demonstration (the episode's last one
+    /// repeated past its end) and a policy acting in an env plays a whole chunk before it looks
+    /// again. 1 (default): one action per observation.
+    pub chunk: usize,
 }
 
 impl Default for BcConfig {
@@ -57,6 +62,7 @@ impl Default for BcConfig {
             batch_size: 256,
             seed: 0,
             obs_clip: 10.0,
+            chunk: 1,
         }
     }
 }
@@ -83,9 +89,15 @@ impl BcConfig {
         if !(self.obs_clip.is_finite() && self.obs_clip > 0.0) {
             return bad(format!("obs_clip = {}: > 0", self.obs_clip));
         }
+        if !(1..=MAX_CHUNK).contains(&self.chunk) {
+            return bad(format!("chunk = {}: 1..={MAX_CHUNK} actions", self.chunk));
+        }
         Ok(())
     }
 }
+
+/// Largest [`BcConfig::chunk`].
+pub const MAX_CHUNK: usize = 100;
 
 /// Demonstrations: one observation and the action taken per sample, row-major.
 #[derive(Clone, Debug, Default)]
@@ -105,6 +117,9 @@ pub struct Demos {
     /// `Some(n)`: each action is one key index in `0..n` (`act_dim` 1), learned by a
     /// classification head; `None`: continuous actions.
     pub discrete: Option<usize>,
+    /// One past the last sample of each demonstration, increasing (empty: the samples are one
+    /// demonstration); action chunks stop at these.
+    pub episode_ends: Vec<usize>,
 }
 
 impl Demos {
@@ -192,6 +207,19 @@ pub fn train_bc(
             )));
         }
     }
+    let k = cfg.chunk;
+    if k > 1 && demos.discrete.is_some() {
+        return Err(LearnError::Config(format!(
+            "chunk = {k}: action chunks are for continuous actions (these are discrete keys)"
+        )));
+    }
+    if demos.episode_ends.windows(2).any(|w| w[0] >= w[1])
+        || demos.episode_ends.last().is_some_and(|e| *e != n)
+    {
+        return Err(LearnError::Config(format!(
+            "episode_ends: increasing, the last = the {n} samples"
+        )));
+    }
     let norm = normaliser(demos, cfg.obs_clip);
     let obs: Vec<f32> = demos
         .obs
@@ -204,27 +232,47 @@ pub fn train_bc(
         })
         .collect();
     // targets: one-hot keys, or the squashed head's units kept off +-1 (no tanh preimage)
-    let outputs = demos.discrete.unwrap_or(ad);
+    let outputs = demos.discrete.unwrap_or(ad * k);
     let target: Vec<f32> = match demos.discrete {
         Some(k) => demos
             .act
             .iter()
             .flat_map(|a| (0..k).map(move |j| if j == *a as usize { 1.0 } else { 0.0 }))
             .collect(),
-        None => demos
-            .act
-            .iter()
-            .enumerate()
-            .map(|(i, a)| {
-                let (l, h) = (demos.low[i % ad], demos.high[i % ad]);
-                let u = if h > l {
-                    2.0 * (a - l) / (h - l) - 1.0
-                } else {
-                    0.0
-                };
-                u.clamp(-0.999, 0.999)
-            })
-            .collect(),
+        None => {
+            let squashed: Vec<f32> = demos
+                .act
+                .iter()
+                .enumerate()
+                .map(|(i, a)| {
+                    let (l, h) = (demos.low[i % ad], demos.high[i % ad]);
+                    let u = if h > l {
+                        2.0 * (a - l) / (h - l) - 1.0
+                    } else {
+                        0.0
+                    };
+                    u.clamp(-0.999, 0.999)
+                })
+                .collect();
+            // each sample's next k actions, the demonstration's last repeated past its end
+            let mut t = Vec::with_capacity(n * ad * k);
+            let mut ends = demos.episode_ends.iter().copied().peekable();
+            let mut end = n;
+            for i in 0..n {
+                while let Some(e) = ends.peek().copied() {
+                    if e > i {
+                        end = e;
+                        break;
+                    }
+                    ends.next();
+                }
+                for j in 0..k {
+                    let s = (i + j).min(end - 1);
+                    t.extend_from_slice(&squashed[s * ad..(s + 1) * ad]);
+                }
+            }
+            t
+        }
     };
     let device = Device::flex().autodiff();
     let mut rng = Rng::new(cfg.seed);
@@ -291,6 +339,7 @@ pub fn train_bc(
             .map_err(|e| LearnError::Config(e.to_string()))?,
         note: note.to_string(),
         discrete: demos.discrete,
+        chunk: k,
     };
     std::fs::create_dir_all(out).map_err(|e| LearnError::Io(format!("{}: {e}", out.display())))?;
     policy::write(out, &meta, record_bytes(actor.valid())?)?;
@@ -305,6 +354,74 @@ pub fn train_bc(
 mod tests {
     use super::*;
     use crate::policy::Policy;
+
+    /// Action chunks: a policy of chunk 3 learns each sample's next three actions, the
+    /// demonstration's last one repeated past its end (never the next demonstration's), and
+    /// `act` gives the first of them. Two demonstrations of a counter: observation t, action t
+    /// (scaled), so the chunk after t is t, t+1, t+2 up to the end.
+    #[test]
+    fn action_chunks_are_the_next_actions_of_the_same_demonstration() {
+        let (mut obs, mut act) = (Vec::new(), Vec::new());
+        for len in [6usize, 4] {
+            for t in 0..len {
+                obs.push(t as f32);
+                act.push(t as f32 * 0.1);
+            }
+        }
+        let demos = Demos {
+            obs,
+            act,
+            obs_dim: 1,
+            act_dim: 1,
+            low: vec![-1.0],
+            high: vec![1.0],
+            discrete: None,
+            episode_ends: vec![6, 10],
+        };
+        let cfg = BcConfig {
+            hidden: vec![64, 64],
+            epochs: 3000,
+            batch_size: 10,
+            chunk: 3,
+            ..BcConfig::default()
+        };
+        let dir = std::env::temp_dir().join(format!("modesuite-bc-chunk-{}", std::process::id()));
+        let s = train_bc(&demos, &cfg, "counter", "{}", &dir, |_, _| {}).unwrap();
+        let p = Policy::load(&dir).unwrap();
+        assert_eq!((p.meta().chunk, p.act_dim()), (3, 1));
+        // t = 4 of the first demonstration: 0.4, 0.5, then its last (0.5) again, not the
+        // second demonstration's first (0.0); at t = 3 the first goes on (0.3, 0.4, 0.5) and
+        // the second ends (0.3, 0.3, 0.3): the network learns their mean
+        let got = p.act_chunk(&[4.0]);
+        let at3 = p.act_chunk(&[3.0]);
+        println!(
+            "chunk BC (MSE {:.2e}): after 4 {got:?} (0.4, 0.5, 0.5), after 3 {at3:?} (0.3, 0.35, 0.4), tolerance 0.02",
+            s.final_loss
+        );
+        for (g, w) in got.iter().zip([0.4, 0.5, 0.5]) {
+            assert!((g - w).abs() < 0.02, "{got:?}");
+        }
+        for (g, w) in at3.iter().zip([0.3, 0.35, 0.4]) {
+            assert!((g - w).abs() < 0.02, "{at3:?}");
+        }
+        let last = at3;
+        assert_eq!(p.act(&[4.0, 3.0]), vec![got[0], last[0]]);
+        // chunks are for continuous actions; ends must close the samples
+        let keys = Demos {
+            discrete: Some(3),
+            act: vec![0.0; 10],
+            ..demos.clone()
+        };
+        let e = train_bc(&keys, &cfg, "k", "{}", &dir, |_, _| {}).unwrap_err();
+        assert!(e.to_string().contains("chunk = 3"), "{e}");
+        let bad_ends = Demos {
+            episode_ends: vec![6, 9],
+            ..demos.clone()
+        };
+        let e = train_bc(&bad_ends, &cfg, "k", "{}", &dir, |_, _| {}).unwrap_err();
+        assert!(e.to_string().contains("episode_ends"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     /// Three keys by the sign pattern of a 2-d observation: the classification head learns
     /// them exactly, the saved policy acts with the arg-max, and bad keys are refused.
@@ -337,6 +454,7 @@ mod tests {
             low: vec![0.0],
             high: vec![2.0],
             discrete: Some(3),
+            episode_ends: Vec::new(),
         };
         let cfg = BcConfig {
             hidden: vec![64, 64],

@@ -71,6 +71,18 @@ pub struct PolicyMeta {
     /// as the arg-max of the network's `n` logits (behaviour cloning's classification head).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub discrete: Option<usize>,
+    /// Actions per observation (behaviour cloning's action chunks): the network gives `chunk`
+    /// actions one after another; [`Policy::act`] returns the first, [`Policy::act_chunk`] all.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub chunk: usize,
+}
+
+fn one() -> usize {
+    1
+}
+
+fn is_one(n: &usize) -> bool {
+    *n == 1
 }
 
 enum Net {
@@ -131,6 +143,7 @@ pub(crate) fn export_ppo(
         config_ron: crate::config::AlgoConfig::Ppo(cfg.clone()).to_ron(),
         note: note.to_string(),
         discrete: None,
+        chunk: 1,
     };
     write(dir, &meta, record_bytes(model.valid())?)
 }
@@ -164,6 +177,7 @@ pub(crate) fn export_sac(
         config_ron: crate::config::AlgoConfig::Sac(cfg.clone()).to_ron(),
         note: note.to_string(),
         discrete: None,
+        chunk: 1,
     };
     write(dir, &meta, record_bytes(actor.valid())?)
 }
@@ -176,7 +190,7 @@ const MAX_PARAMETERS: usize = 1 << 27;
 impl PolicyMeta {
     /// Outputs of the network: the logits of a discrete policy, else the action values.
     pub fn net_outputs(&self) -> usize {
-        self.discrete.unwrap_or(self.act_dim)
+        self.discrete.unwrap_or(self.act_dim * self.chunk)
     }
 
     /// Checks sizes, bounds and normaliser statistics: the message names the field.
@@ -203,6 +217,16 @@ impl PolicyMeta {
                     self.algo, self.act_dim
                 ));
             }
+        }
+        if !(1..=crate::bc::MAX_CHUNK).contains(&self.chunk)
+            || (self.chunk > 1 && (self.discrete.is_some() || self.algo != "bc"))
+        {
+            return Err(format!(
+                "chunk = {} (algo {}): 1..={} actions, above 1 only for a continuous bc policy",
+                self.chunk,
+                self.algo,
+                crate::bc::MAX_CHUNK
+            ));
         }
         let mut params = 0usize;
         let mut width = self.obs_dim;
@@ -340,8 +364,22 @@ impl Policy {
     }
 
     /// Deterministic (mean) actions in the environment's units for one or more observations
-    /// (`obs.len()` a multiple of `obs_dim`; one row of `act_dim` actions each).
+    /// (`obs.len()` a multiple of `obs_dim`; one row of `act_dim` actions each). A policy of
+    /// action chunks gives the first action of each chunk.
     pub fn act(&self, obs: &[f32]) -> Vec<f32> {
+        let all = self.act_chunk(obs);
+        let (ad, k) = (self.meta.act_dim, self.meta.chunk);
+        if k == 1 {
+            return all;
+        }
+        all.chunks_exact(ad * k)
+            .flat_map(|c| c[..ad].iter().copied())
+            .collect()
+    }
+
+    /// [`Policy::act`] with every action of each chunk: `chunk` rows of `act_dim` actions per
+    /// observation, to be taken one after another.
+    pub fn act_chunk(&self, obs: &[f32]) -> Vec<f32> {
         let od = self.meta.obs_dim;
         assert!(
             !obs.is_empty() && obs.len().is_multiple_of(od),

@@ -68,6 +68,7 @@ fn demos(
         d.act.extend_from_slice(a);
         ends.push(d.act.len() / ad.max(1));
     }
+    d.episode_ends.clone_from(&ends);
     if used == 0 {
         return Err(CliError::input(format!(
             "{}: no {}episode to learn from",
