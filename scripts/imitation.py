@@ -28,7 +28,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from results import append_line, read_lines  # noqa: E402
 
 TASKS = ["Spot-Uncover", "Spot-Cover", "Spot-Curtain", "Franka-Uncover", "Franka-Cover", "Franka-Curtain"]
-METHODS = {"bc": [], "retrieval": ["--set", "k=1"]}
+# method name -> (train --algo, extra arguments); bc-chunk5: behaviour cloning with action chunks
+# of 5 (learning.md), added in session 26 after BC stalled on Cover
+METHODS = {"bc": ("bc", []), "retrieval": ("retrieval", ["--set", "k=1"]),
+           "bc-chunk5": ("bc", ["--set", "chunk=5"])}
+LABELS = {"bc": "BC", "retrieval": "Retrieval (k = 1)", "bc-chunk5": "BC, chunks of 5"}
 # the paper's (MoDeSuite, Table: imitation on Spot, DINOv2 features, 30 keyboard demonstrations)
 PAPER = {("Spot-Uncover", "bc"): 85, ("Spot-Cover", "bc"): 60, ("Spot-Curtain", "bc"): 60,
          ("Spot-Uncover", "retrieval"): 90, ("Spot-Cover", "retrieval"): 80, ("Spot-Curtain", "retrieval"): 80}
@@ -57,17 +61,18 @@ def one_task(binary: str, root: Path, task: str, encoder: str) -> None:
     done = {(r["task"], r["method"], r["inputs"]) for r in read_lines(root / "results.jsonl")}
     variants = ["features+state"] + (["features"] if task.startswith("Spot") else [])
     for inputs in variants:
-        for method, extra in METHODS.items():
+        for method in METHODS:
             if (task, method, inputs) not in done:
-                one_policy(binary, root, task, method, extra, inputs, info, encoder, log)
+                one_policy(binary, root, task, method, inputs, info, encoder, log)
 
 
-def one_policy(binary: str, root: Path, task: str, method: str, extra: list[str], inputs: str,
+def one_policy(binary: str, root: Path, task: str, method: str, inputs: str,
                info: dict, encoder: str, log: Path) -> None:
     target = f"MoDe-{task}-v0"
+    algo, extra = METHODS[method]
     out = root / "policies" / inputs / method / task
     if not (out / "policy" / "policy.json").is_file():
-        run([binary, "train", target, "--algo", method, "--dataset", str(root / task), "--inputs", inputs,
+        run([binary, "train", target, "--algo", algo, "--dataset", str(root / task), "--inputs", inputs,
              "--successful-only", "--out", str(out), *extra], log)
     r = run([binary, "eval", str(out), "--episodes", "20", "--json"], log)
     summary = json.loads(r.stdout.strip().splitlines()[-1])
@@ -83,8 +88,8 @@ def table(root: Path) -> str:
             "|---|---|---|---|---|---|---|"]
     for r in read_lines(root / "results.jsonl"):
         ok = round(r["demos"] * (r["demo_success_rate"] or 0))
-        paper = PAPER.get((r["task"], r["method"]))
-        rows.append(f"| {r['task']} | {'BC' if r['method'] == 'bc' else 'Retrieval (k = 1)'} | {r['encoder']} {r['inputs']} "
+        paper = PAPER.get((r["task"], METHODS.get(r["method"], (r["method"],))[0]))
+        rows.append(f"| {r['task']} | {LABELS.get(r['method'], r['method'])} | {r['encoder']} {r['inputs']} "
                     f"| {r['demos']} ({ok}) | **{round(20 * r['success_rate'])}/20** | {r['mean_length']:.0f} "
                     f"| {f'{paper} %' if paper is not None else '-'} |")
     return "\n".join(rows)
