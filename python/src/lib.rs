@@ -587,6 +587,30 @@ pub struct Policy {
     origin: modesuite::learning::PolicyOrigin,
 }
 
+impl Policy {
+    /// `obs` as C-ordered float32 of one `(obs_dim,)` observation (rows `None`) or a batch
+    /// `(n, obs_dim)` (rows `Some(n)`).
+    fn observations<'py>(
+        &self,
+        obs: &Bound<'py, PyAny>,
+    ) -> PyResult<(Option<usize>, numpy::PyReadonlyArrayDyn<'py, f32>)> {
+        let obs = convert::f32_array(obs)?;
+        let shape = obs.shape().to_vec();
+        let (rows, dim) = match shape.as_slice() {
+            [d] => (None, *d),
+            [n, d] => (Some(*n), *d),
+            _ => (None, usize::MAX),
+        };
+        if dim != self.inner.obs_dim() {
+            return Err(PyValueError::new_err(format!(
+                "observations of shape {shape:?}: expected ({0},) or (n, {0})",
+                self.inner.obs_dim()
+            )));
+        }
+        Ok((rows, obs))
+    }
+}
+
 #[pymethods]
 impl Policy {
     /// Loads the policy of a run folder or policy folder.
@@ -601,21 +625,10 @@ impl Policy {
     }
 
     /// Actions (float32) for observations: one `(obs_dim,)` or a batch `(n, obs_dim)`, any
-    /// numeric array (float64, a strided view: converted to C-ordered float32 first).
+    /// numeric array (float64, a strided view: converted to C-ordered float32 first). A policy
+    /// of action chunks gives each chunk's first action (see `act_chunk`).
     fn act<'py>(&self, py: Python<'py>, obs: &Bound<'py, PyAny>) -> PyResult<Py<PyAny>> {
-        let obs = convert::f32_array(obs)?;
-        let shape = obs.shape().to_vec();
-        let (rows, dim) = match shape.as_slice() {
-            [d] => (None, *d),
-            [n, d] => (Some(*n), *d),
-            _ => (None, usize::MAX),
-        };
-        if dim != self.inner.obs_dim() {
-            return Err(PyValueError::new_err(format!(
-                "observations of shape {shape:?}: expected ({0},) or (n, {0})",
-                self.inner.obs_dim()
-            )));
-        }
+        let (rows, obs) = self.observations(obs)?;
         let data = obs.as_slice()?;
         let actions = py.detach(|| self.inner.act(data));
         let act_dim = self.inner.act_dim();
@@ -623,6 +636,26 @@ impl Policy {
             Some(n) => convert::array(py, actions, &[n, act_dim]),
             None => convert::array(py, actions, &[act_dim]),
         }
+    }
+
+    /// Every action of each chunk (`chunk x act_dim` per observation, to be taken one after
+    /// another): `(chunk, act_dim)` for one observation, `(n, chunk, act_dim)` for a batch.
+    fn act_chunk<'py>(&self, py: Python<'py>, obs: &Bound<'py, PyAny>) -> PyResult<Py<PyAny>> {
+        let (rows, obs) = self.observations(obs)?;
+        let data = obs.as_slice()?;
+        let actions = py.detach(|| self.inner.act_chunk(data));
+        let (k, ad) = (self.inner.meta().chunk, self.inner.act_dim());
+        match rows {
+            Some(n) => convert::array(py, actions, &[n, k, ad]),
+            None => convert::array(py, actions, &[k, ad]),
+        }
+    }
+
+    /// Actions per observation (1, or the action chunk of a `bc` policy trained with
+    /// `chunk=K`).
+    #[getter]
+    fn chunk(&self) -> usize {
+        self.inner.meta().chunk
     }
 
     /// The task id or scene file it was trained on.
@@ -637,7 +670,7 @@ impl Policy {
         self.origin.actions.clone()
     }
 
-    /// `ppo` or `sac`.
+    /// `ppo`, `sac` or `bc`.
     #[getter]
     fn algo(&self) -> String {
         self.inner.meta().algo.clone()

@@ -119,3 +119,25 @@ def test_one_video_frame_per_row(dataset: Path) -> None:
         stream = json.loads(out.stdout)["streams"][0]
         assert int(stream["nb_read_frames"]) == e["length"], (mp4, stream)
         assert (stream["width"], stream["height"]) == (128, 128)
+
+
+def test_a_policy_of_action_chunks_from_the_dataset_in_python(
+    dataset: Path, modesuite_bin: Path, tmp_path: Path
+) -> None:
+    """`train --algo bc --set chunk=3` on the recording, loaded with `modesuite.Policy`: its
+    `chunk`, `act_chunk` (3 actions per observation, in bounds) and `act` (each chunk's first)."""
+    import modesuite
+
+    out = tmp_path / "bc3"
+    cmd = [str(modesuite_bin), "train", TASK, "--algo", "bc", "--dataset", str(dataset),
+           "--out", str(out), "--set", "epochs=20", "--set", "chunk=3"]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    policy = modesuite.Policy(out)
+    assert (policy.algo, policy.chunk) == ("bc", 3)
+    obs = np.random.default_rng(0).normal(size=(4, policy.obs_dim))
+    chunks = policy.act_chunk(obs)
+    assert chunks.shape == (4, 3, policy.act_dim) and chunks.dtype == np.float32
+    assert np.all(np.abs(chunks) <= 1.0 + 1e-6)  # Franka Place's EE-delta bounds are +-1
+    assert np.array_equal(policy.act(obs), chunks[:, 0, :])
+    assert policy.act_chunk(obs[2]).shape == (3, policy.act_dim)
+    assert not np.array_equal(chunks[:, 0, :], chunks[:, 2, :])
