@@ -456,8 +456,9 @@ pub struct LearnedPolicy {
     pub policy: modesuite_learn::Policy,
     /// What it observes.
     pub inputs: Observer,
-    /// The rest of the current chunk, next action first.
-    pending: std::collections::VecDeque<Vec<f32>>,
+    /// The current chunk (`chunk x act_dim` actions) and the index of the next one to play.
+    chunk: Vec<f32>,
+    next: usize,
 }
 
 impl LearnedPolicy {
@@ -466,7 +467,8 @@ impl LearnedPolicy {
         Self {
             policy,
             inputs,
-            pending: std::collections::VecDeque::new(),
+            chunk: Vec::new(),
+            next: 0,
         }
     }
 }
@@ -496,23 +498,24 @@ pub fn act_on_inputs(
 
 impl modesuite_tasks::expert::Policy for LearnedPolicy {
     fn reset(&mut self, _seed: u64) {
-        self.pending.clear();
+        self.chunk.clear();
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
-        if let Some(next) = self.pending.pop_front() {
-            action.copy_from_slice(&next);
-            return Ok(());
-        }
         let p = &self.policy;
         let ad = p.act_dim();
-        let mut chunk = Vec::new();
+        let start = self.next * ad;
+        if start < self.chunk.len() {
+            action.copy_from_slice(&self.chunk[start..start + ad]);
+            self.next += 1;
+            return Ok(());
+        }
+        let chunk = &mut self.chunk;
         act_on_inputs(&mut self.inputs, env, action, p.obs_dim(), ad, |o| {
-            chunk = p.act_chunk(o);
+            *chunk = p.act_chunk(o);
             chunk[..ad].to_vec()
         })?;
-        self.pending
-            .extend(chunk.chunks_exact(ad).skip(1).map(<[f32]>::to_vec));
+        self.next = 1;
         Ok(())
     }
 }

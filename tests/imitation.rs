@@ -28,8 +28,10 @@ fn cli(args: &[&str]) -> Output {
 
 const TASK: &str = "MoDe-Franka-Place-v0";
 
-fn train(data: &Path, out: &Path) -> String {
-    ok(cli(&[
+/// Behaviour cloning of Franka Place on `data` into `out` (seed 1, 1,500 epochs), with `extra`
+/// arguments.
+fn train(data: &Path, out: &Path, extra: &[&str]) -> String {
+    let mut args = vec![
         "train",
         TASK,
         "--algo",
@@ -42,7 +44,9 @@ fn train(data: &Path, out: &Path) -> String {
         "1",
         "--set",
         "epochs=1500",
-    ]))
+    ];
+    args.extend_from_slice(extra);
+    ok(cli(&args))
 }
 
 /// Trains a retrieval policy of `task` on `data` into `out` with `extra` arguments and runs it
@@ -88,7 +92,7 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     ]));
     let recorded: serde_json::Value = serde_json::from_str(rec.trim()).unwrap();
     let a = scratch("a");
-    let log = train(&data, &a);
+    let log = train(&data, &a, &[]);
     println!("{log}");
     let run = ok(cli(&[
         "run",
@@ -105,7 +109,7 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     assert_eq!(summary["success_rate"], 1.0, "{run}");
     // the same seed trains the same weights
     let b = scratch("b");
-    train(&data, &b);
+    train(&data, &b, &[]);
     // (compared by what they do: weight files hold burn's random parameter ids)
     let returns = |dir: &Path| -> Vec<String> {
         let run = ok(cli(&[
@@ -159,23 +163,8 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     assert_eq!(chunked["return"], recorded["return"]);
     // BC with action chunks (5 actions per look, played before the next look) overfits it too
     let c = scratch("c");
-    let (d, co) = (data.to_str().unwrap(), c.to_str().unwrap());
-    ok(cli(&[
-        "train",
-        TASK,
-        "--algo",
-        "bc",
-        "--dataset",
-        d,
-        "--out",
-        co,
-        "--seed",
-        "1",
-        "--set",
-        "epochs=1500",
-        "--set",
-        "chunk=5",
-    ]));
+    train(&data, &c, &["--set", "chunk=5"]);
+    let co = c.to_str().unwrap();
     let run = ok(cli(&["run", TASK, "--policy", co, "--seed", "7", "--json"]));
     let summary: serde_json::Value = serde_json::from_str(run.lines().last().unwrap()).unwrap();
     println!(

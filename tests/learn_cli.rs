@@ -205,14 +205,20 @@ fn bad_learning_input_is_a_clear_error() {
 fn an_episode_ended_by_an_error_is_a_cut_that_bootstraps_from_the_state_before_or_a_penalised_end()
 {
     use modesuite::learn::VecEnvironment;
-    let vec = modesuite::make::make_vec(
-        "MoDe-Franka-Place-v0",
-        &modesuite::make::MakeOptions::default(),
-        2,
-        1,
-    )
-    .unwrap();
-    let mut env = modesuite::learning::SimEnv::new(vec, "MoDe-Franka-Place-v0", None).unwrap();
+    // two Franka Place envs on one thread, failures ending as `penalty` says
+    let sim_env = |penalty: Option<f32>| {
+        let vec = modesuite::make::make_vec(
+            "MoDe-Franka-Place-v0",
+            &modesuite::make::MakeOptions::default(),
+            2,
+            1,
+        )
+        .unwrap();
+        modesuite::learning::SimEnv::new(vec, "MoDe-Franka-Place-v0", None)
+            .unwrap()
+            .with_error_penalty(penalty)
+    };
+    let mut env = sim_env(None);
     env.reset(0).unwrap();
     let zero = vec![0.0f32; 2 * env.act_dim()];
     let s1 = env.step(&zero).unwrap();
@@ -228,16 +234,7 @@ fn an_episode_ended_by_an_error_is_a_cut_that_bootstraps_from_the_state_before_o
     assert_eq!(s2.rewards[0], 0.0);
 
     // with an error penalty (the learners' `error_penalty`) the failure is terminal and costs it
-    let vec = modesuite::make::make_vec(
-        "MoDe-Franka-Place-v0",
-        &modesuite::make::MakeOptions::default(),
-        2,
-        1,
-    )
-    .unwrap();
-    let mut env = modesuite::learning::SimEnv::new(vec, "MoDe-Franka-Place-v0", None)
-        .unwrap()
-        .with_error_penalty(Some(-250.0));
+    let mut env = sim_env(Some(-250.0));
     env.reset(0).unwrap();
     let p1 = env.step(&zero).unwrap();
     assert_eq!(p1.obs, s1.obs);

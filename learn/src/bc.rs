@@ -255,21 +255,21 @@ pub fn train_bc(
                 })
                 .collect();
             // each sample's next k actions, the demonstration's last repeated past its end
+            let ends: &[usize] = if demos.episode_ends.is_empty() {
+                &[n]
+            } else {
+                &demos.episode_ends
+            };
             let mut t = Vec::with_capacity(n * ad * k);
-            let mut ends = demos.episode_ends.iter().copied().peekable();
-            let mut end = n;
-            for i in 0..n {
-                while let Some(e) = ends.peek().copied() {
-                    if e > i {
-                        end = e;
-                        break;
+            let mut begin = 0;
+            for &end in ends {
+                for i in begin..end {
+                    for j in 0..k {
+                        let s = (i + j).min(end - 1);
+                        t.extend_from_slice(&squashed[s * ad..(s + 1) * ad]);
                     }
-                    ends.next();
                 }
-                for j in 0..k {
-                    let s = (i + j).min(end - 1);
-                    t.extend_from_slice(&squashed[s * ad..(s + 1) * ad]);
-                }
+                begin = end;
             }
             t
         }

@@ -21,6 +21,7 @@
 //! (a point in the parent frame) the orientation is computed from the position, the point and
 //! the parent's +z as up, and `pose.rpy` must stay zero.
 
+use modesuite_engine::registry::CameraMount;
 use modesuite_engine::scene::{PoseDesc, SceneError, SceneModel};
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::Deserialize;
@@ -362,12 +363,27 @@ impl RenderConfig {
     /// section's own, except where the section has a camera of that name.
     pub fn from_scene(model: &SceneModel) -> Result<Self, SceneError> {
         let mut cfg = Self::from_section(model)?;
-        let mounted: Vec<CameraDesc> = model
-            .sections
-            .iter()
-            .flat_map(|s| s.handler.cameras(&s.compiled))
-            .filter(|m| cfg.camera(&m.name).is_none())
-            .map(|m| CameraDesc {
+        let before = cfg.cameras.len();
+        cfg.add_mounted(
+            model
+                .sections
+                .iter()
+                .flat_map(|s| s.handler.cameras(&s.compiled)),
+        );
+        if cfg.cameras.len() > before {
+            cfg.validate()?;
+        }
+        Ok(cfg)
+    }
+
+    /// Adds cameras other sections bring ([`CameraMount`]s) after the section's own, except
+    /// where the section has a camera of the same name (the section's wins). Not validated.
+    pub fn add_mounted(&mut self, mounts: impl IntoIterator<Item = CameraMount>) {
+        for m in mounts {
+            if self.camera(&m.name).is_some() {
+                continue;
+            }
+            self.cameras.push(CameraDesc {
                 name: m.name,
                 width: m.width,
                 height: m.height,
@@ -379,13 +395,8 @@ impl RenderConfig {
                 far: default_far(),
                 markers: false,
                 overlays: false,
-            })
-            .collect();
-        if !mounted.is_empty() {
-            cfg.cameras.extend(mounted);
-            cfg.validate()?;
+            });
         }
-        Ok(cfg)
     }
 
     /// The scene's render section alone.

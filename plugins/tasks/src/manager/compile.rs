@@ -20,21 +20,16 @@ pub(super) fn scene_cameras(
 ) -> Result<BTreeMap<String, (u32, u32)>, SceneError> {
     // The render section reports its own errors with their place; an unreadable one leaves
     // no cameras of its own here.
-    let cfg: Option<modesuite_render::RenderConfig> = ctx
+    let mut cfg: modesuite_render::RenderConfig = ctx
         .extension(modesuite_render::config::EXTENSION_KEY)
-        .and_then(|text| modesuite_engine::scene::ron_options().from_str(text).ok());
-    let mut cameras: BTreeMap<String, (u32, u32)> = cfg
-        .map(|c| {
-            c.cameras
-                .iter()
-                .map(|c| (c.name.clone(), (c.width, c.height)))
-                .collect()
-        })
+        .and_then(|text| modesuite_engine::scene::ron_options().from_str(text).ok())
         .unwrap_or_default();
-    for m in ctx.mounted_cameras {
-        cameras.entry(m.name.clone()).or_insert((m.width, m.height));
-    }
-    Ok(cameras)
+    cfg.add_mounted(ctx.mounted_cameras.iter().cloned());
+    Ok(cfg
+        .cameras
+        .iter()
+        .map(|c| (c.name.clone(), (c.width, c.height)))
+        .collect())
 }
 
 /// Checks that an event's `object` is in the scene; a robot link (`robot/link`, spawned by the
