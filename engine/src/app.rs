@@ -2,7 +2,7 @@
 //!
 //! A [`SimApp`] is one simulated environment: a `World` plus its three schedules
 //! ([`EnvStep`], [`PhysicsStep`], [`Substep`]). Plugins add systems to the public sets below and
-//! register named capabilities (shapes, body kinds, terms, robots, sensors) in the [`Registry`].
+//! register named capabilities (shapes, body kinds, terms, robots, sensors) in the [`Registry`](crate::registry::Registry).
 //! A vectorised environment builds one `SimApp` per env from the same plugin list (see
 //! [`crate::env::VecEnv`]); compiled scene data is shared between them through `Arc`.
 //!
@@ -20,8 +20,7 @@ use std::sync::Arc;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::{LogLevel, ScheduleLabel, SingleThreadedExecutor};
 
-use crate::registry::Registry;
-use crate::scene::{SceneError, SceneModel};
+pub use crate::settings::{Phase, SimClock, SimErrors, SimSettings, DEFAULT_MAX_BODY_SPEED};
 use crate::state::{StateRegistry, Stateful};
 
 /// The top-level schedule: one environment step (one agent decision).
@@ -91,130 +90,6 @@ pub enum EngineSystems {
     Observations,
 }
 
-/// Which pass of [`EnvStep`] is running.
-#[derive(Resource, Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Phase {
-    /// A normal step: actions, simulation, evaluation.
-    #[default]
-    Step,
-    /// The pass after a snapshot restore: reset events, sensing and observation only.
-    Reset,
-}
-
-/// Timing of the simulation, fixed per scene.
-#[derive(Resource, Debug, Clone, Copy, PartialEq)]
-pub struct SimSettings {
-    /// Physics step in seconds.
-    pub dt: f64,
-    /// Substeps per physics step (each `dt / substeps` seconds).
-    pub substeps: u32,
-    /// Physics steps per env step.
-    pub decimation: u32,
-    /// Gravity in the world frame, m/s^2 (z up).
-    pub gravity: nalgebra::Vector3<f64>,
-    /// Internal solver substeps of each rapier step.
-    pub rigid_iterations: u32,
-    /// Projected Gauss-Seidel sweeps per internal solver substep.
-    pub rigid_pgs_iterations: u32,
-    /// Friction also in rapier's position-correcting (bias) pass.
-    pub rigid_friction_in_bias_pass: bool,
-    /// Substeps per deformable step (1: every substep; the scene's `physics.substeps /
-    /// physics.deformable_substeps`): deformable bodies step at the first substep of every
-    /// `deformable_stride`, over that many substeps' time, before the rigid world's substep.
-    pub deformable_stride: u32,
-    /// Deformable steps per substep (1: one; the scene's `physics.deformable_substeps /
-    /// physics.substeps` when that is larger): each substep's deformable step is split into
-    /// this many, the `i`-th (from 0) following the rigid bodies to their poses
-    /// `(i + 1) / deformable_inner` of the way through the last rigid substep
-    /// (`RigidContext::body_pose_between`), while colliders are extrapolated from
-    /// `i * substep / deformable_inner` after the rigid state.
-    pub deformable_inner: u32,
-    /// Linear speed (m/s) of a rigid body, by its velocity or by its displacement over a rapier
-    /// step, above which the rigid physics is reported as blown up (the episode ends with an
-    /// error naming the body).
-    pub max_body_speed: f64,
-}
-
-/// Default of [`SimSettings::max_body_speed`] and the scene's `physics.max_body_speed`, m/s.
-pub const DEFAULT_MAX_BODY_SPEED: f64 = 100.0;
-
-impl Default for SimSettings {
-    fn default() -> Self {
-        Self {
-            dt: 1.0 / 60.0,
-            substeps: 1,
-            decimation: 1,
-            gravity: nalgebra::Vector3::new(0.0, 0.0, -9.81),
-            rigid_iterations: 4,
-            rigid_pgs_iterations: 1,
-            rigid_friction_in_bias_pass: false,
-            deformable_stride: 1,
-            deformable_inner: 1,
-            max_body_speed: DEFAULT_MAX_BODY_SPEED,
-        }
-    }
-}
-
-impl SimSettings {
-    /// Substep length in seconds.
-    pub fn substep_dt(&self) -> f64 {
-        self.dt / f64::from(self.substeps.max(1))
-    }
-}
-
-/// Counters of the simulation (part of the env state).
-#[derive(
-    Resource, Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize,
-)]
-pub struct SimClock {
-    /// Env steps since the episode started.
-    pub episode_steps: u64,
-    /// Physics steps since the episode started.
-    pub physics_steps: u64,
-    /// Substeps since the episode started.
-    pub substeps: u64,
-    /// Simulated seconds since the episode started.
-    pub time: f64,
-}
-
-crate::persist_by_serde!(SimClock);
-
-impl Stateful for SimClock {
-    fn save_state(&self) -> Box<dyn std::any::Any + Send + Sync> {
-        Box::new(*self)
-    }
-    fn load_state(
-        &mut self,
-        state: &(dyn std::any::Any + Send + Sync),
-    ) -> Result<(), crate::checkpoint::StateError> {
-        crate::state::restore_clone(self, state)
-    }
-    fn hash_state(&self, h: &mut crate::state::StateHasher) {
-        h.write_u64(self.episode_steps);
-        h.write_u64(self.physics_steps);
-        h.write_u64(self.substeps);
-        h.write_f64(self.time);
-    }
-}
-
-/// Errors the simulation reports instead of panicking (physics blow-ups, plugin failures).
-/// Systems push into this; the env ends the episode with the reason in `info["error"]`.
-#[derive(Resource, Debug, Clone, Default)]
-pub struct SimErrors {
-    /// Errors raised during the current env step (cleared at the start of each step).
-    pub current: Vec<String>,
-    /// Total errors since the env was created (not reset by episodes).
-    pub total: u64,
-}
-
-impl SimErrors {
-    /// Record an error; the env ends the episode after this step.
-    pub fn raise(&mut self, message: impl Into<String>) {
-        self.current.push(message.into());
-        self.total += 1;
-    }
-}
-
 /// A unit of functionality: adds systems, resources and registry entries to a [`SimApp`].
 ///
 /// Plugins are built once per environment (each env has its own `World`), so `build` must be
@@ -255,7 +130,6 @@ pub struct SimApp {
     /// The ECS world of this environment.
     pub world: World,
     plugins: Vec<Arc<dyn Plugin>>,
-    scene: Option<Arc<SceneModel>>,
     /// The plugin whose `build` is running (named in setup errors).
     building: Option<String>,
     /// What went wrong while plugins were built (a name registered twice): the app compiles no
@@ -308,6 +182,19 @@ fn count_env_step(mut clock: ResMut<SimClock>) {
     clock.episode_steps += 1;
 }
 
+/// The engine's own time-limit termination (in `Evaluate`): truncates at `EpisodeLimit`.
+fn time_limit(
+    limit: Option<Res<crate::settings::EpisodeLimit>>,
+    clock: Res<SimClock>,
+    mut signals: ResMut<crate::signals::StepSignals>,
+) {
+    if let Some(crate::settings::EpisodeLimit(Some(n))) = limit.as_deref() {
+        if clock.episode_steps >= *n {
+            signals.truncated = true;
+        }
+    }
+}
+
 impl SimApp {
     /// An app with the engine's schedules, sets and core resources, and no plugins.
     pub fn new() -> Self {
@@ -316,12 +203,11 @@ impl SimApp {
         world.insert_resource(SimClock::default());
         world.insert_resource(SimErrors::default());
         world.insert_resource(Phase::Step);
-        world.insert_resource(Registry::default());
         world.insert_resource(StateRegistry::default());
         world.insert_resource(crate::rng::EnvRng::from_seed(0));
-        world.insert_resource(crate::env::ActionBuffer::default());
-        world.insert_resource(crate::env::ObservationBuffer::default());
-        world.insert_resource(crate::env::StepSignals::default());
+        world.insert_resource(crate::signals::ActionBuffer::default());
+        world.insert_resource(crate::signals::ObservationBuffer::default());
+        world.insert_resource(crate::signals::StepSignals::default());
         // Registered up front so queries with optional components work before any is spawned.
         world.register_component::<crate::components::Object>();
         world.register_component::<crate::components::Pose>();
@@ -348,7 +234,7 @@ impl SimApp {
         );
         env_step.configure_sets(EngineSystems::TimeLimit.in_set(EnvSystems::Evaluate));
         env_step.add_systems(
-            (crate::terms::evaluate_scene_terms, crate::scene::time_limit)
+            (crate::terms::evaluate_scene_terms, time_limit)
                 .chain()
                 .in_set(EngineSystems::TimeLimit),
         );
@@ -377,7 +263,6 @@ impl SimApp {
         let mut app = Self {
             world,
             plugins: Vec::new(),
-            scene: None,
             building: None,
             setup_errors: Vec::new(),
         };
@@ -469,7 +354,7 @@ impl SimApp {
         C: Component<Mutability = bevy_ecs::component::Mutable>
             + Clone
             + crate::state::HashState
-            + crate::checkpoint::Persist,
+            + crate::codec::Persist,
     >(
         &mut self,
     ) -> &mut Self {
@@ -477,16 +362,6 @@ impl SimApp {
             .resource_mut::<StateRegistry>()
             .add_component::<C>();
         self
-    }
-
-    /// The registry of named capabilities.
-    pub fn registry(&self) -> &Registry {
-        self.world.resource::<Registry>()
-    }
-
-    /// Mutable access to the registry (the `register_*` verbs below are shorthands).
-    pub fn registry_mut(&mut self) -> Mut<'_, Registry> {
-        self.world.resource_mut::<Registry>()
     }
 
     /// Records a setup error (a plugin's conflicting registration): the app then refuses to
@@ -512,51 +387,6 @@ impl SimApp {
         ));
     }
 
-    /// Inserts `value` under `name` into one of the registry's maps unless the name is taken
-    /// there; a second registration is refused (the first stays) and reported.
-    fn register_unique<T>(
-        &mut self,
-        what: &str,
-        name: String,
-        value: T,
-        map: fn(&mut Registry) -> &mut std::collections::BTreeMap<String, T>,
-    ) -> &mut Self {
-        if !crate::registry::insert_unique(map(&mut self.registry_mut()), name.clone(), value) {
-            self.report_duplicate(what, &name);
-        }
-        self
-    }
-
-    /// Registers a shape generator under its name (RON: `Gen(name: "...", params: ...)`).
-    pub fn register_shape(
-        &mut self,
-        generator: Arc<dyn crate::registry::ShapeGenerator>,
-    ) -> &mut Self {
-        let name = generator.name().to_string();
-        self.register_unique("shape generator", name, generator, |r| &mut r.shapes)
-    }
-
-    /// Registers a body kind (RON: `body: Kind(kind: "fem.solid", params: ...)`).
-    pub fn register_body_kind(&mut self, kind: Arc<dyn crate::registry::BodyKind>) -> &mut Self {
-        let name = kind.name().to_string();
-        self.register_unique("body kind", name, kind, |r| &mut r.body_kinds)
-    }
-
-    /// Registers a task term (observation, reward, termination, event) under its name.
-    pub fn register_term(&mut self, term: crate::registry::TermEntry) -> &mut Self {
-        let name = term.name.clone();
-        self.register_unique("term", name, term, |r| &mut r.terms)
-    }
-
-    /// Registers a passive force on deformables (RON: `passive_forces: [(force: "...", ...)]`).
-    pub fn register_passive_force(
-        &mut self,
-        force: Arc<dyn crate::terms::PassiveForce>,
-    ) -> &mut Self {
-        let name = force.name().to_string();
-        self.register_unique("passive force", name, force, |r| &mut r.forces)
-    }
-
     /// Declares `len` f64 state slots for `owner` in [`crate::state::PluginStates`] (part of the
     /// env state: saved in snapshots, restored on reset, hashed).
     pub fn declare_plugin_state(&mut self, owner: &str, len: usize) -> &mut Self {
@@ -564,60 +394,6 @@ impl SimApp {
             .get_resource_or_insert_with(crate::state::PluginStates::default)
             .declare(owner, len);
         self.register_stateful::<crate::state::PluginStates>()
-    }
-
-    /// Registers a robot under its name.
-    pub fn register_robot(&mut self, robot: crate::registry::RobotEntry) -> &mut Self {
-        let name = robot.name.clone();
-        self.register_unique("robot", name, robot, |r| &mut r.robots)
-    }
-
-    /// Registers the handler of a plugin-owned scene section (`extensions: { "key": ... }`).
-    pub fn register_section(&mut self, section: impl crate::registry::SceneSection) -> &mut Self {
-        let section: Arc<dyn crate::registry::SceneSection> = Arc::new(section);
-        let name = section.name().to_string();
-        self.register_unique("scene section", name, section, |r| &mut r.sections)
-    }
-
-    /// Registers a sensor type under its name.
-    pub fn register_sensor(&mut self, sensor: crate::registry::SensorEntry) -> &mut Self {
-        let name = sensor.name.clone();
-        self.register_unique("sensor", name, sensor, |r| &mut r.sensors)
-    }
-
-    /// Compiles a scene description with this app's registries (body kinds, shapes).
-    pub fn compile_scene(
-        &self,
-        desc: &crate::scene::SceneDesc,
-        source: &crate::scene::SceneSource,
-    ) -> Result<Arc<SceneModel>, SceneError> {
-        if !self.setup_errors.is_empty() {
-            return Err(SceneError::semantic(
-                "plugins",
-                self.setup_errors.join("; "),
-                "plugins whose names do not clash",
-            ));
-        }
-        crate::scene::compile(desc, source, self.registry()).map(Arc::new)
-    }
-
-    /// Spawns a compiled scene into this app's world and sets the simulation settings.
-    pub fn spawn_scene(&mut self, model: Arc<SceneModel>) -> Result<(), SceneError> {
-        if self.scene.is_some() {
-            return Err(SceneError::semantic(
-                "scene",
-                "already spawned",
-                "one scene per app; build a new SimApp",
-            ));
-        }
-        crate::scene::spawn(&model, self)?;
-        self.scene = Some(model);
-        Ok(())
-    }
-
-    /// The compiled scene of this app, if one was spawned.
-    pub fn scene(&self) -> Option<&Arc<SceneModel>> {
-        self.scene.as_ref()
     }
 
     /// Runs one env step (one pass of [`EnvStep`] in [`Phase::Step`]).

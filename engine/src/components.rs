@@ -80,19 +80,19 @@ pub struct JointState {
 }
 
 /// The names are fixed at spawn; positions and velocities are the state.
-impl crate::checkpoint::Persist for JointState {
-    fn encode(&self, e: &mut crate::checkpoint::Encoder) {
+impl crate::codec::Persist for JointState {
+    fn encode(&self, e: &mut crate::codec::Encoder) {
         e.put(&self.positions);
         e.put(&self.velocities);
     }
     fn decode(
         &mut self,
-        d: &mut crate::checkpoint::Decoder<'_>,
-    ) -> Result<(), crate::checkpoint::StateError> {
+        d: &mut crate::codec::Decoder<'_>,
+    ) -> Result<(), crate::codec::StateError> {
         let positions: Vec<f64> = d.take()?;
         let velocities: Vec<f64> = d.take()?;
         if positions.len() != self.names.len() || velocities.len() != self.names.len() {
-            return Err(crate::checkpoint::StateError::part(
+            return Err(crate::codec::StateError::part(
                 d.part(),
                 format!(
                     "{} positions and {} velocities for {} joints",

@@ -31,6 +31,7 @@
 pub mod app;
 pub mod bench;
 pub mod checkpoint;
+pub mod codec;
 pub mod components;
 pub mod contact;
 pub mod coupling;
@@ -45,7 +46,9 @@ pub mod registry;
 pub mod rigid;
 pub mod rng;
 pub mod scene;
+pub mod settings;
 pub mod shapes;
+pub mod signals;
 pub mod simd;
 pub mod state;
 pub mod surface;

@@ -92,7 +92,7 @@ pub struct SectionCompileContext<'a> {
     /// Gravity and timing of the scene.
     pub settings: &'a crate::SimSettings,
     /// The scene's compiled objects (sections compile after the objects).
-    pub objects: &'a [crate::scene::ObjectModel],
+    pub objects: &'a [ObjectModel],
     /// Named frames and targets of the scene.
     pub frames: &'a BTreeMap<String, nalgebra::Isometry3<f64>>,
     /// Where the scene came from (errors map into the file).
@@ -326,4 +326,123 @@ impl crate::shapes::ShapeGenerators for Registry {
     fn names(&self) -> Vec<String> {
         self.shapes.keys().cloned().collect()
     }
+}
+
+/// A compiled body: rigid (engine) or owned by a plugin body kind.
+#[derive(Clone)]
+pub enum BodyModel {
+    /// Simulated by the rigid plugin (rapier).
+    Rigid(crate::scene::RigidModel),
+    /// Simulated by a plugin.
+    Plugin {
+        /// The body kind that compiled it and spawns it.
+        kind: Arc<dyn BodyKind>,
+        /// Its compiled data.
+        compiled: CompiledBody,
+    },
+}
+
+/// One compiled object.
+#[derive(Clone)]
+pub struct ObjectModel {
+    /// Unique name.
+    pub name: String,
+    /// Initial `world_from_body`.
+    pub pose: nalgebra::Isometry3<f64>,
+    /// Resolved material.
+    pub material: crate::scene::MaterialDesc,
+    /// Display colour.
+    pub color: Option<[f32; 3]>,
+    /// The shape as written (renderers mesh it as they need).
+    pub shape: crate::shapes::ShapeDesc,
+    /// Body.
+    pub body: BodyModel,
+    /// Whether a deformable body touches other deformables.
+    pub collide: bool,
+    /// A deformable's collision group (members do not touch each other).
+    pub collision_group: Option<String>,
+}
+
+/// The registry verbs of [`SimApp`] (here, beside the registry, so that the application layer
+/// does not depend on what plugins register). The registry is a world resource, inserted on the
+/// first registration.
+impl SimApp {
+    /// The registry of named capabilities.
+    pub fn registry(&self) -> &Registry {
+        self.world
+            .get_resource::<Registry>()
+            .unwrap_or_else(|| empty_registry())
+    }
+
+    /// Mutable access to the registry (the `register_*` verbs below are shorthands).
+    pub fn registry_mut(&mut self) -> Mut<'_, Registry> {
+        self.world.get_resource_or_insert_with(Registry::default)
+    }
+
+    /// Inserts `value` under `name` into one of the registry's maps unless the name is taken
+    /// there; a second registration is refused (the first stays) and reported.
+    fn register_unique<T>(
+        &mut self,
+        what: &str,
+        name: String,
+        value: T,
+        map: fn(&mut Registry) -> &mut std::collections::BTreeMap<String, T>,
+    ) -> &mut Self {
+        if !insert_unique(map(&mut self.registry_mut()), name.clone(), value) {
+            self.report_duplicate(what, &name);
+        }
+        self
+    }
+
+    /// Registers a shape generator under its name (RON: `Gen(name: "...", params: ...)`).
+    pub fn register_shape(&mut self, generator: Arc<dyn ShapeGenerator>) -> &mut Self {
+        let name = generator.name().to_string();
+        self.register_unique("shape generator", name, generator, |r| &mut r.shapes)
+    }
+
+    /// Registers a body kind (RON: `body: Kind(kind: "fem.solid", params: ...)`).
+    pub fn register_body_kind(&mut self, kind: Arc<dyn BodyKind>) -> &mut Self {
+        let name = kind.name().to_string();
+        self.register_unique("body kind", name, kind, |r| &mut r.body_kinds)
+    }
+
+    /// Registers a task term (observation, reward, termination, event) under its name.
+    pub fn register_term(&mut self, term: TermEntry) -> &mut Self {
+        let name = term.name.clone();
+        self.register_unique("term", name, term, |r| &mut r.terms)
+    }
+
+    /// Registers a passive force on deformables (RON: `passive_forces: [(force: "...", ...)]`).
+    pub fn register_passive_force(
+        &mut self,
+        force: Arc<dyn crate::terms::PassiveForce>,
+    ) -> &mut Self {
+        let name = force.name().to_string();
+        self.register_unique("passive force", name, force, |r| &mut r.forces)
+    }
+
+    /// Registers a robot under its name.
+    pub fn register_robot(&mut self, robot: RobotEntry) -> &mut Self {
+        let name = robot.name.clone();
+        self.register_unique("robot", name, robot, |r| &mut r.robots)
+    }
+
+    /// Registers the handler of a plugin-owned scene section (`extensions: { "key": ... }`).
+    pub fn register_section(&mut self, section: impl SceneSection) -> &mut Self {
+        let section: Arc<dyn SceneSection> = Arc::new(section);
+        let name = section.name().to_string();
+        self.register_unique("scene section", name, section, |r| &mut r.sections)
+    }
+
+    /// Registers a sensor type under its name.
+    pub fn register_sensor(&mut self, sensor: SensorEntry) -> &mut Self {
+        let name = sensor.name.clone();
+        self.register_unique("sensor", name, sensor, |r| &mut r.sensors)
+    }
+}
+
+/// The registry of an app in which nothing was registered.
+fn empty_registry() -> &'static Registry {
+    static EMPTY: std::sync::OnceLock<Registry> = std::sync::OnceLock::new();
+    EMPTY.get_or_init(Registry::default)
 }

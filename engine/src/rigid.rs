@@ -18,7 +18,7 @@ use parry3d::partitioning::{Bvh, BvhBuildStrategy};
 use rapier3d::prelude::*;
 
 use crate::app::{PhysicsSystems, Plugin, SimErrors, SubstepSystems};
-use crate::checkpoint::{Decoder, Encoder, Persist, StateError};
+use crate::codec::{Decoder, Encoder, Persist, StateError};
 use crate::components::{Object, Pose, Velocity};
 use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::math::{

@@ -91,7 +91,7 @@ impl Stateful for EnvRng {
     fn load_state(
         &mut self,
         state: &(dyn std::any::Any + Send + Sync),
-    ) -> Result<(), crate::checkpoint::StateError> {
+    ) -> Result<(), crate::codec::StateError> {
         crate::state::restore_clone(self, state)
     }
     fn hash_state(&self, h: &mut StateHasher) {

@@ -12,7 +12,7 @@ use std::any::Any;
 use bevy_ecs::component::Mutable;
 use bevy_ecs::prelude::*;
 
-use crate::checkpoint::{Decoder, Encoder, Persist, StateError};
+use crate::codec::{Decoder, Encoder, Persist, StateError};
 
 /// A resource that is part of the env state: copied in memory for resets ([`Snapshot`]) and
 /// written to state files through its [`Persist`] codec.

@@ -30,7 +30,7 @@ use bevy_ecs::prelude::*;
 use nalgebra::{Isometry3, Vector3};
 
 use crate::components::{DeformableNodes, JointState, Object, Pose, Velocity};
-use crate::env::{ObservationBuffer, StepSignals};
+use crate::signals::{ObservationBuffer, StepSignals};
 use crate::state::PluginStates;
 use crate::{SimClock, SimErrors, SimSettings};
 

@@ -39,10 +39,10 @@ use std::sync::Arc;
 use bevy_ecs::prelude::*;
 use nalgebra::Vector3;
 
-use crate::checkpoint::StateError;
+use crate::codec::StateError;
 use crate::components::Object;
 use crate::coupling::{ContactQuery, PointContact, Reaction};
-use crate::deformable::{deformable_ref, DeformableSolver};
+use crate::deformable::solver::{deformable_ref, DeformableSolver};
 use crate::scene::{MaterialDesc, ObjectDesc, SceneError};
 use crate::state::{restore_clone, StateHasher, Stateful};
 use geometry::TriangleBvh;

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use modesuite_plugin_abi as abi;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use super::{status, Text, UserPtr};
+use super::call::{status, Text, UserPtr};
 use crate::events::{ConfiguredEvent, EventFactory, EventWorld};
 
 type EventConfigureFn =

@@ -28,7 +28,10 @@ use std::sync::Arc;
 use modesuite_plugin_abi as abi;
 use nalgebra::Vector3;
 
+mod call;
 mod events;
+
+use call::{status, Text, UserPtr};
 
 use crate::registry::{ShapeGenerator, TermEntry, TermKind};
 use crate::shapes::{GeneratedMesh, MeshKind, SurfaceMesh, VolumeMesh, MAX_ELEMENTS};
@@ -88,60 +91,6 @@ pub enum PluginLoadError {
         /// Which name and where it is used.
         message: String,
     },
-}
-
-/// A plugin context pointer (the `user` field of a declaration).
-#[derive(Clone, Copy)]
-struct UserPtr(*const c_void);
-
-// SAFETY: the ABI requires plugin callbacks to be callable from any thread, concurrently (one
-// env per thread); the pointer itself is only passed back to the plugin, never dereferenced here.
-unsafe impl Send for UserPtr {}
-// SAFETY: as above.
-unsafe impl Sync for UserPtr {}
-
-/// A host-side text buffer handed to the plugin as a [`abi::TextSink`].
-struct Text(String);
-
-extern "C" fn write_text(ctx: *mut c_void, text: abi::AbiStr) {
-    if ctx.is_null() || (text.len > 0 && text.ptr.is_null()) {
-        return;
-    }
-    // SAFETY: `ctx` is the `Text` this module passed for the duration of the call.
-    let buf = unsafe { &mut *ctx.cast::<Text>() };
-    let bytes = if text.len == 0 {
-        &[][..]
-    } else {
-        // SAFETY: the plugin passes `len` readable bytes, valid during this call.
-        unsafe { std::slice::from_raw_parts(text.ptr, text.len) }
-    };
-    buf.0.push_str(&String::from_utf8_lossy(bytes));
-}
-
-impl Text {
-    fn sink(&mut self) -> abi::TextSink {
-        abi::TextSink {
-            ctx: (self as *mut Text).cast(),
-            write: write_text,
-        }
-    }
-}
-
-/// Turns a status code and the error text into a result; `what` names the call.
-fn status(plugin: &str, what: &str, code: i32, text: Text) -> Result<(), String> {
-    let message = if text.0.is_empty() {
-        "(no message)".to_string()
-    } else {
-        text.0
-    };
-    match code {
-        abi::STATUS_OK => Ok(()),
-        abi::STATUS_ERROR => Err(message),
-        abi::STATUS_PANIC => Err(format!("plugin \"{plugin}\" {what}: {message}")),
-        other => Err(format!(
-            "plugin \"{plugin}\" {what}: unknown status {other} ({message})"
-        )),
-    }
 }
 
 /// Copies `n * k` values from a plugin array (bounded by [`MAX_ELEMENTS`]).

@@ -7,16 +7,16 @@
 mod surface;
 #[cfg(test)]
 mod tests;
+mod text;
 mod volume;
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::Vector3;
-
+use super::context::ShapeContext;
 use super::error::ShapeError;
 use super::mesh::{SurfaceMesh, VolumeMesh};
-use super::ShapeContext;
 use surface::{parse_obj, parse_stl};
+use text::parse_error;
 use volume::{parse_medit, parse_msh};
 
 /// Largest mesh file read, bytes (1 GiB).
@@ -112,14 +112,6 @@ fn text_of<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str, ShapeError> {
         line: 0,
         message: format!("not UTF-8 text: {e}"),
     })
-}
-
-fn parse_error(path: &Path, line: usize, message: impl Into<String>) -> ShapeError {
-    ShapeError::Parse {
-        path: path.to_path_buf(),
-        line,
-        message: message.into(),
-    }
 }
 
 /// Loads a surface file: `.obj` (vertices `v x y z`, faces `f` with any number of corners, fan
@@ -230,35 +222,4 @@ pub fn load_volume_bytes(path: &Path, bytes: &[u8]) -> Result<LoadedVolume, Shap
         reoriented,
         quadratic_reduced,
     })
-}
-
-/// Parses `n` whitespace-separated floats from `tokens`, naming `what` in errors.
-fn floats<'a>(
-    path: &Path,
-    line: usize,
-    tokens: &mut impl Iterator<Item = &'a str>,
-    what: &str,
-) -> Result<Vector3<f64>, ShapeError> {
-    let mut v = Vector3::zeros();
-    for k in 0..3 {
-        let tok = tokens.next().ok_or_else(|| {
-            parse_error(
-                path,
-                line,
-                format!("{what}: expected 3 coordinates, found {k}"),
-            )
-        })?;
-        let x: f64 = tok
-            .parse()
-            .map_err(|_| parse_error(path, line, format!("{what}: '{tok}' is not a number")))?;
-        if !x.is_finite() {
-            return Err(parse_error(
-                path,
-                line,
-                format!("{what}: coordinate {tok} is not finite"),
-            ));
-        }
-        v[k] = x;
-    }
-    Ok(v)
 }

@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 use super::super::error::{check_count, ShapeError};
 use super::super::mesh::SurfaceMesh;
 
-use super::{floats, parse_error};
+use super::text::{floats, parse_error};
 
 pub(super) fn parse_obj(path: &Path, text: &str) -> Result<SurfaceMesh, ShapeError> {
     let mut positions = Vec::new();

@@ -7,7 +7,7 @@ use nalgebra::Vector3;
 
 use super::super::error::{check_count, ShapeError, MAX_ELEMENTS};
 
-use super::{floats, parse_error};
+use super::text::{floats, parse_error};
 
 /// Non-empty lines of a text with 1-based line numbers, for the line-structured gmsh format.
 struct Lines<'a> {

@@ -9,6 +9,7 @@ use std::f64::consts::TAU;
 
 use nalgebra::Vector3;
 
+use super::context::{GeneratedMesh, MeshKind, ShapeContext};
 use super::desc::{is_full_turn, to_vec2, to_vec3, Profile, ShapeDesc, SweepPath};
 use super::error::{check_count, ShapeError};
 use super::files;
@@ -16,7 +17,6 @@ use super::mesh::{SurfaceMesh, VolumeMesh};
 use super::section::{self, Section};
 use super::sweep::{sample_polyline, sweep_volume, transport_frames, Frame};
 use super::tess;
-use super::{GeneratedMesh, MeshKind, ShapeContext};
 
 /// The shapes [`ShapeDesc::volume`] can mesh, for error messages.
 const VOLUME_SHAPES: &str =
