@@ -519,18 +519,21 @@ fn report(src: &str) -> (usize, Vec<String>) {
     (n_edges, lines)
 }
 
-/// The crates whose module graphs are layered; the other crates (render, robots, tasks, learn,
-/// the CLI) still have cycles between a parent module and its helpers (ARCHITECTURE.md).
-const LAYERED: [(&str, usize); 5] = [
+/// The crates whose module graphs are layered; the learning crate and the CLI still have cycles
+/// between a parent module and its helpers (ARCHITECTURE.md).
+const LAYERED: [(&str, usize); 8] = [
     ("engine/src", 100),
     ("plugins/fem/src", 40),
     ("plugins/pbd/src", 30),
+    ("plugins/render/src", 15),
+    ("plugins/robots/src", 40),
+    ("plugins/tasks/src", 20),
     ("dataset/src", 10),
     ("python/src", 1),
 ];
 
 #[test]
-fn the_engine_and_solver_modules_form_no_import_cycle() {
+fn the_engine_and_plugin_modules_form_no_import_cycle() {
     let mut all = Vec::new();
     for (src, at_least) in LAYERED {
         let (edges, cycles) = report(src);

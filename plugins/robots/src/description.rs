@@ -19,7 +19,7 @@ use serde::Deserialize;
 use crate::actions::{ArmMode, BaseMode, GripperMode};
 use crate::control::JointGains;
 use crate::error::RobotError;
-use crate::locomotion::TrotParams;
+use crate::gait::TrotParams;
 
 /// How the robot's base moves.
 #[derive(Debug, Clone, PartialEq, Deserialize)]

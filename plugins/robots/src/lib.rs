@@ -26,6 +26,7 @@ pub mod actions;
 pub mod control;
 pub mod description;
 pub mod error;
+pub mod gait;
 pub mod ik;
 pub mod locomotion;
 pub mod models;

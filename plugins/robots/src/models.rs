@@ -13,7 +13,7 @@ use crate::description::{
     join_lexically, BaseDesc, BuiltinRobot, GainsDesc, RobotFile, WalkingDesc, BUILTIN,
 };
 use crate::error::RobotError;
-use crate::locomotion::TrotParams;
+use crate::gait::TrotParams;
 use crate::robot::{spawn_robot, Robot, RootMount, SpawnOptions};
 use crate::urdf::{parse_urdf, AssetPaths, UrdfModel};
 

@@ -3,7 +3,7 @@
 
 use crate::geometry::Vertex;
 
-use super::{Pipelines, COLOR_FORMAT, DATA_FORMAT, DEPTH_FORMAT};
+use super::device::{Pipelines, COLOR_FORMAT, DATA_FORMAT, DEPTH_FORMAT};
 
 fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
     const ATTRS: [wgpu::VertexAttribute; 5] = wgpu::vertex_attr_array![

@@ -11,7 +11,7 @@ use crate::config::{look_at, LightDesc};
 use crate::geometry::FrameGeometry;
 use crate::RenderError;
 
-use super::{RenderDevice, COLOR_FORMAT, DATA_FORMAT, DEPTH_FORMAT};
+use super::device::{RenderDevice, COLOR_FORMAT, DATA_FORMAT, DEPTH_FORMAT};
 
 /// The per-view uniform block (see `View` in shader.wgsl).
 #[repr(C)]

@@ -27,6 +27,7 @@
 //! `spawn` (a robot's entities and runtime), `runtime` (the per-env [`Robots`] state and
 //! [`RobotObservation`]) and `systems` (actions, scripts and control each step).
 
+mod model;
 mod runtime;
 mod section;
 mod spawn;
@@ -46,11 +47,11 @@ use modesuite_engine::{
 use crate::description::BUILTIN;
 use crate::models::RobotSpec;
 
-pub use runtime::{RobotFixed, RobotObservation, RobotRuntime, Robots};
-pub use section::{
-    BrokenRobot, CompiledRobot, RobotDesc, RobotsSection, Script, ScriptBase, ScriptEe,
-    ScriptGripper,
+pub use model::{
+    BrokenRobot, CompiledRobot, RobotDesc, Script, ScriptBase, ScriptEe, ScriptGripper,
 };
+pub use runtime::{RobotFixed, RobotObservation, RobotRuntime, Robots};
+pub use section::RobotsSection;
 pub use systems::BASE_LIMITS;
 use systems::{robot_actions, robot_control, robot_writeback};
 

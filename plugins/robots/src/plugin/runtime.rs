@@ -11,7 +11,7 @@ use modesuite_engine::checkpoint::{Decoder, Encoder, Persist, StateError};
 use modesuite_engine::state::{mismatch, StateHasher, Stateful};
 use modesuite_engine::RigidContext;
 
-use super::Script;
+use super::model::Script;
 use crate::actions::ActionModes;
 use crate::control::{BaseVelocity, HolonomicBase, JointCommand, JointController};
 use crate::error::RobotError;

@@ -10,7 +10,8 @@ use modesuite_engine::components::{JointState, Object, Pose, Velocity};
 use modesuite_engine::rigid::RigidRef;
 use modesuite_engine::{RigidContext, SimApp};
 
-use super::{CompiledRobot, RobotFixed, RobotRuntime};
+use super::model::CompiledRobot;
+use super::runtime::{RobotFixed, RobotRuntime};
 use crate::actions::BaseMode;
 use crate::control::{BaseVelocity, HolonomicBase, JointController};
 use crate::error::RobotError;

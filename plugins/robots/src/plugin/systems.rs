@@ -10,7 +10,8 @@ use modesuite_engine::coupling::{GripperState, Grippers};
 use modesuite_engine::env::ActionBuffer;
 use modesuite_engine::{RigidContext, SimClock, SimErrors, SimSettings};
 
-use super::{RobotFixed, RobotRuntime, Robots, Script};
+use super::model::Script;
+use super::runtime::{RobotFixed, RobotRuntime, Robots};
 use crate::actions::{ArmMode, BaseMode, DiscreteKey};
 use crate::control::{BaseVelocity, JointCommand};
 use crate::error::RobotError;

@@ -13,7 +13,7 @@ use modesuite_render::CameraImages;
 use modesuite_robots::{RobotObservation, Robots};
 use nalgebra::Vector3;
 
-use super::{NamedTerm, Resolved, Task, TaskObservations, TaskPoints, TaskState};
+use super::model::{NamedTerm, Resolved, Task, TaskObservations, TaskPoints, TaskState};
 use crate::terms::{Dims, TaskCtx};
 
 /// The task's points now, in point order; a `Stages` point moves on to its next stage when

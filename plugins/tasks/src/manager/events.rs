@@ -14,7 +14,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use std::sync::Arc;
 
-use super::{Task, TaskState};
+use super::model::{Task, TaskState};
 use crate::desc::EventDesc;
 use crate::events::{EventCtx, EventOps, TaskEvent};
 

@@ -17,13 +17,16 @@ use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::compile::{check_event, configure, resolve_extends, scene_cameras, serr};
 use super::events::TaskStartup;
-use super::spaces::{frame_items, has_images, policy_space};
-use super::{
+use super::model::{
     Group, NamedTerm, ObsTerm, Resolved, RewardTerm, SurfaceObject, Target, Task, TaskModel,
-    TaskObservations, TaskPoints, TaskSection, TaskState,
+    TaskObservations, TaskPoints, TaskState,
 };
+use super::spaces::{frame_items, has_images, policy_space};
 use crate::desc::{PointRef, TaskDesc};
 use crate::terms::{tracked_nodes, Configure, Dims};
+
+/// The `task` scene section.
+pub struct TaskSection;
 
 impl SceneSection for TaskSection {
     fn name(&self) -> &str {

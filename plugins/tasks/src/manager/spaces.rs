@@ -3,7 +3,7 @@
 
 use modesuite_engine::Space;
 
-use super::Group;
+use super::model::Group;
 use crate::terms::Dims;
 
 /// The space of the `policy` group: one unbounded box of every run of state terms (its
