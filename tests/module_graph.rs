@@ -519,15 +519,16 @@ fn report(src: &str) -> (usize, Vec<String>) {
     (n_edges, lines)
 }
 
-/// The crates whose module graphs are layered; the learning crate and the CLI still have cycles
+/// The crates whose module graphs are layered; the umbrella crate (the CLI) still has cycles
 /// between a parent module and its helpers (ARCHITECTURE.md).
-const LAYERED: [(&str, usize); 8] = [
+const LAYERED: [(&str, usize); 9] = [
     ("engine/src", 100),
     ("plugins/fem/src", 40),
     ("plugins/pbd/src", 30),
     ("plugins/render/src", 15),
     ("plugins/robots/src", 40),
     ("plugins/tasks/src", 20),
+    ("learn/src", 50),
     ("dataset/src", 10),
     ("python/src", 1),
 ];

@@ -18,12 +18,11 @@ use burn::tensor::activation::log_softmax;
 use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
+use crate::actors::{record_bytes, SacActor, NORM_EPS};
 use crate::config::SacConfig;
 use crate::nets::Activation;
 use crate::policy::{self, ObsNorm, PolicyMeta, POLICY_FORMAT_VERSION};
-use crate::ppo::{record_bytes, NORM_EPS};
 use crate::rng::Rng;
-use crate::sac::SacActor;
 use crate::tensors::{scalar, tensor2};
 use crate::LearnError;
 
@@ -96,8 +95,7 @@ impl BcConfig {
     }
 }
 
-/// Largest [`BcConfig::chunk`].
-pub const MAX_CHUNK: usize = 100;
+pub use crate::policy::MAX_CHUNK;
 
 /// Demonstrations: one observation and the action taken per sample, row-major.
 #[derive(Clone, Debug, Default)]

@@ -15,6 +15,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod actors;
 pub mod bc;
 pub mod checkpoint;
 pub mod config;

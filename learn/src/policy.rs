@@ -7,16 +7,18 @@ use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+use crate::actors::{load_record, record_bytes, ActorCritic, SacActor, NORM_EPS};
 use crate::checkpoint::{write_atomic, Identity};
 use crate::config::{PpoConfig, SacConfig};
 use crate::nets::Activation;
 use crate::normalize::RunningMeanStd;
-use crate::ppo::{load_record, record_bytes, ActorCritic, NORM_EPS};
 use crate::rng::Rng;
 use crate::runner::{rescale, EnvShape};
-use crate::sac::SacActor;
 use crate::tensors::{tensor2, to_vec};
 use crate::LearnError;
+
+/// Largest action chunk of a policy ([`crate::bc::BcConfig::chunk`]).
+pub const MAX_CHUNK: usize = 100;
 
 /// Version of the policy files' layout.
 pub const POLICY_FORMAT_VERSION: u32 = 1;
@@ -218,14 +220,12 @@ impl PolicyMeta {
                 ));
             }
         }
-        if !(1..=crate::bc::MAX_CHUNK).contains(&self.chunk)
+        if !(1..=MAX_CHUNK).contains(&self.chunk)
             || (self.chunk > 1 && (self.discrete.is_some() || self.algo != "bc"))
         {
             return Err(format!(
                 "chunk = {} (algo {}): 1..={} actions, above 1 only for a continuous bc policy",
-                self.chunk,
-                self.algo,
-                crate::bc::MAX_CHUNK
+                self.chunk, self.algo, MAX_CHUNK
             ));
         }
         let mut params = 0usize;

@@ -11,89 +11,27 @@
 //! from the value of its final observation (rl_games uses the value of the observation acted
 //! on).
 
-use burn::module::{Module, Param};
+use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 use std::time::Instant;
 
+pub use crate::actors::ActorCritic;
+use crate::actors::{guarded, load_record, rec_err, record_bytes, NORM_EPS};
 use crate::checkpoint::{Checkpoint, Identity};
 use crate::config::{AlgoConfig, PpoConfig};
 use crate::dist::{bounds_loss, gaussian_entropy, gaussian_kl, gaussian_log_prob};
 use crate::gae::gae;
 use crate::metrics::{EpisodeTracker, Metrics};
-use crate::nets::{clip_grad_norm, flat_params, Dense, Mlp};
+use crate::nets::{clip_grad_norm, flat_params};
 use crate::normalize::RunningMeanStd;
 use crate::rng::Rng;
 use crate::runner::{check_step, gather_rows, rescale, restart, EnvShape, Trainer};
 use crate::tensors::{scalar, tensor1, tensor2, to_vec};
 use crate::{LearnError, VecEnvironment};
 
-/// Epsilon of the normalisers' standard deviations.
-pub(crate) const NORM_EPS: f64 = 1e-5;
 /// rl_games clips normalised values to +-5.
 const VALUE_CLIP: f64 = 5.0;
-
-/// The actor-critic network: Gaussian mean head, value head, state-independent log std.
-#[derive(Module, Debug)]
-pub struct ActorCritic {
-    /// Actor trunk (also the critic's when not separate).
-    pub trunk: Mlp,
-    /// Critic trunk when the networks are separate.
-    pub critic_trunk: Option<Mlp>,
-    /// Action-mean head.
-    pub mu: Dense,
-    /// Value head (one output: the normalised value when value normalisation is on).
-    pub value: Dense,
-    /// Log standard deviation, `[1, act_dim]`.
-    pub log_std: Param<Tensor<2>>,
-}
-
-impl ActorCritic {
-    /// A freshly initialised network.
-    pub fn new(
-        rng: &mut Rng,
-        obs_dim: usize,
-        act_dim: usize,
-        cfg: &PpoConfig,
-        device: &Device,
-    ) -> Self {
-        let trunk = Mlp::new(rng, obs_dim, &cfg.hidden, cfg.activation, device);
-        let critic_trunk = cfg
-            .separate
-            .then(|| Mlp::new(rng, obs_dim, &cfg.hidden, cfg.activation, device));
-        let h = trunk.out_dim(obs_dim);
-        // A small action-mean head starts the policy near zero mean.
-        let mu = Dense::new(rng, h, act_dim, 0.01, device);
-        let value = Dense::new(rng, h, 1, 1.0, device);
-        let log_std = Param::from_tensor(Tensor::from_data(
-            TensorData::new(vec![cfg.init_log_std; act_dim], [1, act_dim]),
-            device,
-        ));
-        ActorCritic {
-            trunk,
-            critic_trunk,
-            mu,
-            value,
-            log_std,
-        }
-    }
-
-    /// Action means `[batch, act]` and values `[batch, 1]`.
-    pub fn forward(&self, obs: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
-        let h = self.trunk.forward(obs.clone());
-        let mu = self.mu.forward(h.clone());
-        let v = match &self.critic_trunk {
-            Some(c) => self.value.forward(c.forward(obs)),
-            None => self.value.forward(h),
-        };
-        (mu, v)
-    }
-
-    /// Action means only.
-    pub fn mean(&self, obs: Tensor<2>) -> Tensor<2> {
-        self.mu.forward(self.trunk.forward(obs))
-    }
-}
 
 /// Statistics of one PPO update that tests and diagnostics look at.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -569,43 +507,6 @@ impl Trainer for Ppo {
             note,
         )
     }
-}
-
-pub(crate) fn rec_err(e: burn::store::RecordError) -> LearnError {
-    LearnError::Checkpoint(format!("{e:?}"))
-}
-
-pub(crate) fn record_bytes<M: Module>(m: M) -> Result<Vec<u8>, LearnError> {
-    Ok(m.into_record().into_bytes().map_err(rec_err)?.to_vec())
-}
-
-pub(crate) fn load_record<M: Module>(m: M, bytes: &[u8]) -> Result<M, LearnError> {
-    guarded("record", || {
-        let rec = burn::store::ModuleRecord::from_bytes(burn::tensor::Bytes::from_bytes_vec(
-            bytes.to_vec(),
-        ))
-        .map_err(rec_err)?;
-        m.try_load_record(rec).map_err(rec_err)
-    })
-}
-
-/// Runs a decoder of burn records, turning a panic inside burn (it asserts on some malformed
-/// records, e.g. optimizer tensors without a parameter id) into a checkpoint error naming
-/// `what`.
-pub(crate) fn guarded<T>(
-    what: &str,
-    f: impl FnOnce() -> Result<T, LearnError>,
-) -> Result<T, LearnError> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| {
-        let why = p
-            .downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_default();
-        Err(LearnError::Checkpoint(format!(
-            "section '{what}' is malformed ({why})"
-        )))
-    })
 }
 
 pub(crate) fn rms_from(

@@ -8,79 +8,16 @@ use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 use std::time::Instant;
 
+pub use crate::actors::SacActor;
+use crate::actors::{guarded, load_record, rec_err, record_bytes};
 use crate::checkpoint::{Checkpoint, Identity};
 use crate::config::{AlgoConfig, SacConfig};
-use crate::dist::tanh_gaussian_log_prob;
 use crate::metrics::{EpisodeTracker, Metrics};
 use crate::nets::{clip_grad_norm, flat_params, polyak, Dense, Mlp};
-use crate::ppo::{guarded, load_record, rec_err, record_bytes};
 use crate::rng::Rng;
 use crate::runner::{check_step, rescale, restart, EnvShape, Trainer};
 use crate::tensors::{scalar, tensor1, tensor2, to_vec};
 use crate::{LearnError, VecEnvironment};
-
-/// The actor: a trunk, a mean head and a state-dependent log-std head squashed into bounds.
-#[derive(Module, Debug)]
-pub struct SacActor {
-    /// Hidden layers.
-    pub trunk: Mlp,
-    /// Mean of the pre-squash Gaussian.
-    pub mu: Dense,
-    /// Raw log standard deviation (mapped into the bounds with tanh).
-    pub log_std: Dense,
-    /// Lower bound of the log standard deviation.
-    pub log_std_min: f32,
-    /// Upper bound of the log standard deviation.
-    pub log_std_max: f32,
-}
-
-impl SacActor {
-    /// A freshly initialised actor.
-    pub fn new(
-        rng: &mut Rng,
-        obs_dim: usize,
-        act_dim: usize,
-        cfg: &SacConfig,
-        device: &Device,
-    ) -> Self {
-        let trunk = Mlp::new(rng, obs_dim, &cfg.hidden, cfg.activation, device);
-        let h = trunk.out_dim(obs_dim);
-        SacActor {
-            trunk,
-            mu: Dense::new(rng, h, act_dim, 1.0, device),
-            log_std: Dense::new(rng, h, act_dim, 1.0, device),
-            log_std_min: cfg.log_std_bounds.0,
-            log_std_max: cfg.log_std_bounds.1,
-        }
-    }
-
-    /// Pre-squash mean and log standard deviation.
-    pub fn forward(&self, obs: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
-        let h = self.trunk.forward(obs);
-        let mu = self.mu.forward(h.clone());
-        let raw = self.log_std.forward(h).tanh();
-        let half = 0.5 * (self.log_std_max - self.log_std_min);
-        let log_std = raw
-            .add_scalar(1.0)
-            .mul_scalar(half)
-            .add_scalar(self.log_std_min);
-        (mu, log_std)
-    }
-
-    /// The deterministic action `tanh(mu)` in [-1, 1].
-    pub fn mean_action(&self, obs: Tensor<2>) -> Tensor<2> {
-        self.forward(obs).0.tanh()
-    }
-
-    /// A reparameterised sample `tanh(mu + std * eps)` and its log-probability, for noise
-    /// `eps` of shape `[batch, act]`.
-    pub fn sample(&self, obs: Tensor<2>, eps: Tensor<2>) -> (Tensor<2>, Tensor<1>) {
-        let (mu, log_std) = self.forward(obs);
-        let u = mu.clone() + log_std.clone().exp() * eps;
-        let logp = tanh_gaussian_log_prob(u.clone(), mu, log_std);
-        (u.tanh(), logp)
-    }
-}
 
 /// One Q network on the concatenation of observation and action.
 #[derive(Module, Debug)]

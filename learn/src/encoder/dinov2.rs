@@ -28,8 +28,8 @@ use burn::tensor::activation::{gelu, softmax};
 use burn::tensor::{Device, Tensor, TensorData};
 use safetensors::{Dtype, SafeTensors};
 
+use super::image::{Image, ImageEncoder};
 use super::resample::{bicubic_grid, resize_rgb};
-use super::{Image, ImageEncoder};
 use crate::tensors::to_vec;
 use crate::LearnError;
 

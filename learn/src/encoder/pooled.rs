@@ -1,6 +1,6 @@
 //! The weights-free encoder: the image averaged over a grid of cells.
 
-use super::{Image, ImageEncoder};
+use super::image::{Image, ImageEncoder};
 use crate::LearnError;
 
 /// Depth (m) that maps to 1.0; farther, and pixels where nothing was hit (0 or not finite),
