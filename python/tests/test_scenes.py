@@ -68,6 +68,22 @@ def test_experts_of_a_vector_env_match_single_envs() -> None:
     assert venv.state_hashes() == [e.state_hash() for e in singles]
 
 
+def test_the_shipped_drag_policy_drags_the_belt_round_the_post(root: Path) -> None:
+    """Issue 29: the shipped PPO Franka Drag policy, from Python, on the first held-out seed:
+    success after exactly the 77 steps `modesuite eval` reports (deterministic)."""
+    policy = modesuite.Policy(root / "policies/ppo/MoDe-Franka-Drag-v0")
+    assert (policy.target, policy.algo) == ("MoDe-Franka-Drag-v0", "ppo")
+    env = gym.make(f"modesuite/{policy.target}")
+    obs, _ = env.reset(seed=1_000_000)
+    steps = 0
+    for steps in range(1, 301):
+        obs, _, terminated, truncated, info = env.step(policy.act(obs.astype(np.float32)))
+        if terminated or truncated:
+            break
+    print(f"PPO Drag from Python: ended {info['ended']} after {steps} steps (want success, 77)")
+    assert (info["ended"], steps) == ("success", 77)
+
+
 def test_a_shipped_trained_policy_solves_its_task(root: Path) -> None:
     policy = modesuite.Policy(root / "policies/ppo/MoDe-Franka-Place-v0")
     assert (policy.target, policy.algo) == ("MoDe-Franka-Place-v0", "ppo")
