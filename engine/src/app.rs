@@ -2,7 +2,8 @@
 //!
 //! A [`SimApp`] is one simulated environment: a `World` plus its three schedules
 //! ([`EnvStep`], [`PhysicsStep`], [`Substep`]). Plugins add systems to the public sets below and
-//! register named capabilities (shapes, body kinds, terms, robots, sensors) in the [`Registry`](crate::registry::Registry).
+//! register named capabilities (shapes, body kinds, terms, robots, sensors) in the
+//! [`Registry`](crate::registry::Registry).
 //! A vectorised environment builds one `SimApp` per env from the same plugin list (see
 //! [`crate::env::VecEnv`]); compiled scene data is shared between them through `Arc`.
 //!
@@ -20,7 +21,9 @@ use std::sync::Arc;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::{LogLevel, ScheduleLabel, SingleThreadedExecutor};
 
+use crate::settings::EpisodeLimit;
 pub use crate::settings::{Phase, SimClock, SimErrors, SimSettings, DEFAULT_MAX_BODY_SPEED};
+use crate::signals::{ActionBuffer, ObservationBuffer, StepSignals};
 use crate::state::{StateRegistry, Stateful};
 
 /// The top-level schedule: one environment step (one agent decision).
@@ -184,11 +187,11 @@ fn count_env_step(mut clock: ResMut<SimClock>) {
 
 /// The engine's own time-limit termination (in `Evaluate`): truncates at `EpisodeLimit`.
 fn time_limit(
-    limit: Option<Res<crate::settings::EpisodeLimit>>,
+    limit: Option<Res<EpisodeLimit>>,
     clock: Res<SimClock>,
-    mut signals: ResMut<crate::signals::StepSignals>,
+    mut signals: ResMut<StepSignals>,
 ) {
-    if let Some(crate::settings::EpisodeLimit(Some(n))) = limit.as_deref() {
+    if let Some(EpisodeLimit(Some(n))) = limit.as_deref() {
         if clock.episode_steps >= *n {
             signals.truncated = true;
         }
@@ -205,9 +208,9 @@ impl SimApp {
         world.insert_resource(Phase::Step);
         world.insert_resource(StateRegistry::default());
         world.insert_resource(crate::rng::EnvRng::from_seed(0));
-        world.insert_resource(crate::signals::ActionBuffer::default());
-        world.insert_resource(crate::signals::ObservationBuffer::default());
-        world.insert_resource(crate::signals::StepSignals::default());
+        world.insert_resource(ActionBuffer::default());
+        world.insert_resource(ObservationBuffer::default());
+        world.insert_resource(StepSignals::default());
         // Registered up front so queries with optional components work before any is spawned.
         world.register_component::<crate::components::Object>();
         world.register_component::<crate::components::Pose>();

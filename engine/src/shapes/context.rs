@@ -21,7 +21,8 @@ pub enum GeneratedMesh {
     Volume(VolumeMesh),
 }
 
-/// Shape generators registered by plugins, looked up by name for [`ShapeDesc::Gen`](super::ShapeDesc::Gen).
+/// Shape generators registered by plugins, looked up by name for
+/// [`ShapeDesc::Gen`](super::ShapeDesc::Gen).
 pub trait ShapeGenerators {
     /// Runs generator `name` with its parameters as raw RON text (the plugin parses them into its own
     /// type, e.g. with `ron::from_str`). `want` says which kind of mesh the caller needs; returning a

@@ -1,8 +1,9 @@
 //! The trot gait's parameters ([`TrotParams`]): data a robot file and a scene write, checked
 //! here; the controller that uses them is [`crate::locomotion::TrotController`].
 
-/// Parameters of [`TrotController`](crate::locomotion::TrotController); a robot's `gait` in a scene (any subset of the fields, the
-/// rest at their defaults, e.g. `gait: (period: 0.35, kp: 900.0)`).
+/// Parameters of [`TrotController`](crate::locomotion::TrotController); a robot's `gait` in a
+/// scene (any subset of the fields, the rest at their defaults, e.g.
+/// `gait: (period: 0.35, kp: 900.0)`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TrotParams {
@@ -46,8 +47,8 @@ pub struct TrotParams {
     pub kd: f64,
     /// The velocity feed-forward makes up for the damping of rapier's implicit spring motor
     /// (`kp h` over a rigid step `h`) as well as for `kd` (default true; see
-    /// [`TrotController::write`](crate::locomotion::TrotController::write)). Without it, Spot at 1/120 s substeps side-steps 17 % slow
-    /// and drifts off its circles. `false` keeps the lead of the scenes tuned before it (Spot
+    /// [`TrotController::write`](crate::locomotion::TrotController::write)). Without it, Spot at
+    /// 1/120 s substeps side-steps 17 % slow and drifts off its circles. `false` keeps the lead of the scenes tuned before it (Spot
     /// Cover, whose expert fails with it).
     pub implicit_damping_lead: bool,
 }

@@ -7,8 +7,8 @@
 //! segmentation id) targets, an optional translucent marker pass into colour only, and copies into
 //! the readback buffer. Any number of envs and cameras go into one command buffer and one wait.
 //!
-//! Files: `device` (adapter, device, queue); `pipelines` (shaders, layouts, pipelines), `targets` (per-env
-//! targets, views, readback) with `targets/encode` (recording a frame).
+//! Files: `device` (adapter, device, queue); `pipelines` (shaders, layouts, pipelines),
+//! `targets` (per-env targets, views, readback) with `targets/encode` (recording a frame).
 
 mod device;
 mod pipelines;
