@@ -4,6 +4,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
+# disk space before and after, for a CI log that ends early
+df -h "$(dirname "$CARGO_TARGET_DIR")" 2>/dev/null | tail -1 | sed 's/^/test: disk before: /' || true
+trap 'du -sh "$CARGO_TARGET_DIR" 2>/dev/null | sed "s/^/test: build outputs: /"; df -h "$(dirname "$CARGO_TARGET_DIR")" 2>/dev/null | tail -1 | sed "s/^/test: disk after: /"' EXIT
 cargo fmt --all -- --check
 cargo clippy --locked --workspace --all-targets -- -D warnings
 # the binding crate has no Rust tests of its own: maturin builds it below
