@@ -12,6 +12,10 @@ evaluation with every episode successful; the policy of its best evaluation so f
 `best_policy/` (with `eval.json`), since a later chunk can do worse (SAC especially). Killed at any moment, it continues where it was: a
 chunk already evaluated is not evaluated again, and training resumes from its checkpoint.
 `--table` prints the markdown table of all evaluations found.
+
+Every evaluation line is also appended to `docs/results/evals/<algo>-<task>-seed<k>.jsonl`, which
+is committed: `runs/` (checkpoints, metrics) stays on the machine that trained, the record of
+what each run reached does not, and `--table` reads it when a run's folder is absent.
 """
 
 from __future__ import annotations
@@ -42,6 +46,13 @@ PLAN = (
 
 def run_dir(root: Path, algo: str, task: str, seed: int) -> Path:
     return root / algo / task / f"seed{seed}"
+
+
+LEDGER = Path(__file__).resolve().parent.parent / "docs" / "results" / "evals"
+
+
+def ledger_path(algo: str, task: str, seed: int) -> Path:
+    return LEDGER / f"{algo}-{task}-seed{seed}.jsonl"
 
 
 def read_lines(path: Path) -> list[dict]:
@@ -93,6 +104,8 @@ def one_run(binary: str, root: Path, algo: str, task: str, seed: int) -> None:
                 "mean_length": summary["mean_length"], "errors": summary["errors"]}
         best = max((e["success_rate"] or 0 for e in read_lines(evals)), default=-1.0)
         append_line(evals, line)
+        ledger_path(algo, task, seed).parent.mkdir(parents=True, exist_ok=True)
+        append_line(ledger_path(algo, task, seed), line)
         if (summary["success_rate"] or 0) > best or not (d / "best_policy").is_dir():
             # keep the policy of the best evaluation: SAC in particular can fall back later
             shutil.rmtree(d / "best_policy.tmp", ignore_errors=True)
@@ -109,7 +122,8 @@ def table(root: Path) -> str:
     rows = ["| algo | task | seed | env steps | train wall (s) | eval success (20, seeds 1e6+) | eval return | first eval >= 90 %: env steps / train wall (s) |",
             "|---|---|---|---|---|---|---|---|"]
     for algo, task, seed in PLAN:
-        ev = read_lines(run_dir(root, algo, task, seed) / "evals.jsonl")
+        ev = read_lines(run_dir(root, algo, task, seed) / "evals.jsonl") or read_lines(
+            ledger_path(algo, task, seed))
         if not ev:
             continue
         last = ev[-1]

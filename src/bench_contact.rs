@@ -62,7 +62,11 @@ fn cases() -> Vec<(&'static str, String)> {
             example(include_str!("../scenes/examples/box_on_foam.scene.ron")),
         ),
         (
-            // (a box lighter than the deformable it lands on is not coupled stably yet: issue 30)
+            "box_on_torus",
+            example(include_str!("../scenes/examples/box_on_torus.scene.ron")),
+        ),
+        (
+            // the box (0.5 kg) is lighter than the block (2.7 kg): the rigid solver resolves it
             "K_box_on_block",
             k_scene(
                 r#"(name: "box", shape: Box(size: (0.1, 0.1, 0.1)), pose: (pos: (0.0, 0.0, 0.35)), body: Dynamic(mass: 0.5)),"#,

@@ -233,6 +233,7 @@ fn bench_suites_json_have_their_keys() {
                 "cloth_over_torus",
                 "cloths_falling",
                 "box_on_foam",
+                "box_on_torus",
                 "K_box_on_block",
                 "K_blocks",
                 "K_cloth_on_block",

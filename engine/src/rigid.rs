@@ -78,6 +78,56 @@ impl Plugin for RigidPlugin {
     }
 }
 
+/// `user_data` of the colliders of dynamic scene bodies (robots' links carry none): the bodies
+/// that resolve their contact with a heavier deformable themselves
+/// ([`RigidContext::resolves_with_surface`], [`crate::contact::rigid_side`]).
+pub const SCENE_BODY_TAG: u128 = 0x5343_454e << 96;
+/// `user_data` tag (bits 96..128) of a deformable surface's collider; bits 0..32 hold its scene
+/// object's index and bits 32..96 the body's total mass (f64 bits): [`surface_user_data`].
+pub const SURFACE_TAG: u128 = 0x5355_5246 << 96;
+const TAG_MASK: u128 = 0xffff_ffff << 96;
+
+/// The `user_data` of the collider of scene object `object`'s deformable surface, of total
+/// mass `mass` kg.
+pub fn surface_user_data(object: u32, mass: f64) -> u128 {
+    SURFACE_TAG | (u128::from(mass.to_bits()) << 32) | u128::from(object)
+}
+
+/// The scene object index and total mass of a deformable surface's collider `user_data`.
+pub fn surface_of(user_data: u128) -> Option<(u32, f64)> {
+    (user_data & TAG_MASK == SURFACE_TAG).then(|| {
+        let mass = f64::from_bits((user_data >> 32) as u64);
+        (user_data as u32, mass)
+    })
+}
+
+/// Whether a rigid body whose collider carries `tag` resolves its contact with a deformable of
+/// total mass `surface_mass` itself: a dynamic scene body lighter than the deformable. Then the
+/// rigid solver treats the deformable's surface as a collider and the deformable is handed the
+/// reaction; otherwise the deformable resolves the contact (the coupling scheme of
+/// [`crate::contact`]: the lighter side resolves).
+fn rigid_resolves(body: &RigidBody, tag: u128, surface_mass: f64) -> bool {
+    tag == SCENE_BODY_TAG && body.is_dynamic() && f64::from(body.mass()) < surface_mass
+}
+
+/// rapier's pair filter for deformable surfaces' colliders (they carry
+/// `ActiveHooks::FILTER_CONTACT_PAIRS`; other pairs are never asked): a surface touches the
+/// bodies that resolve their contact with it ([`rigid_resolves`]) and nothing else.
+struct SurfaceFilter;
+
+impl PhysicsHooks for SurfaceFilter {
+    fn filter_contact_pair(&self, c: &PairFilterContext) -> Option<SolverFlags> {
+        let (c1, c2) = (c.colliders.get(c.collider1)?, c.colliders.get(c.collider2)?);
+        let (mass, other, body) = match (surface_of(c1.user_data), surface_of(c2.user_data)) {
+            (Some((_, m)), None) => (m, c2, c.rigid_body2?),
+            (None, Some((_, m))) => (m, c1, c.rigid_body1?),
+            _ => return None,
+        };
+        let body = c.bodies.get(body)?;
+        rigid_resolves(body, other.user_data, mass).then_some(SolverFlags::COMPUTE_RIGID_IMPULSES)
+    }
+}
+
 /// All rapier state of one env, plus the entity <-> body map and pending reactions.
 #[derive(Resource)]
 pub struct RigidContext {
@@ -200,6 +250,10 @@ impl RigidContext {
             Some(m) => collider.mass(m as f32),
             None => collider.density(material.density as f32),
         };
+        let collider = match model.kind {
+            RigidKind::Dynamic => collider.user_data(SCENE_BODY_TAG),
+            _ => collider,
+        };
         self.colliders
             .insert_with_parent(collider.build(), handle, &mut self.bodies);
         self.body_ids.push((handle, entity));
@@ -224,6 +278,27 @@ impl RigidContext {
     /// Handle and entity of a body id.
     pub fn body_of_id(&self, id: u32) -> Option<(RigidBodyHandle, Entity)> {
         self.body_ids.get(id as usize).copied()
+    }
+
+    /// Whether body id `body` resolves its contact with a deformable of total mass
+    /// `surface_mass` kg itself (then the deformable leaves that body out of its own contacts;
+    /// [`crate::contact::rigid_side`]).
+    pub fn resolves_with_surface(&self, body: u32, surface_mass: f64) -> bool {
+        let Some(b) = self.body_of_id(body).and_then(|(h, _)| self.bodies.get(h)) else {
+            return false;
+        };
+        let tag = b
+            .colliders()
+            .first()
+            .and_then(|c| self.colliders.get(*c))
+            .map_or(0, |c| c.user_data);
+        rigid_resolves(b, tag, surface_mass)
+    }
+
+    /// Whether any dynamic scene body is lighter than `surface_mass` kg (so a deformable of
+    /// that mass needs a surface collider).
+    pub fn any_resolves_with_surface(&self, surface_mass: f64) -> bool {
+        (0..self.body_ids.len() as u32).any(|id| self.resolves_with_surface(id, surface_mass))
     }
 
     /// Current pose (`world_from_body`) of a body id.
@@ -321,7 +396,13 @@ impl RigidContext {
     fn build_query_bvh(&self) -> (Bvh, Vec<QueryLeaf>) {
         let mut leaves = Vec::with_capacity(self.colliders.len());
         let mut aabbs = Vec::with_capacity(self.colliders.len());
-        for (h, co) in self.colliders.iter() {
+        // deformable surfaces' colliders are for the rigid solver only: deformables see each
+        // other through `crate::contact`
+        for (h, co) in self
+            .colliders
+            .iter()
+            .filter(|(_, c)| surface_of(c.user_data).is_none())
+        {
             let pose = co.position();
             let plane = co
                 .shape()
@@ -416,7 +497,7 @@ impl RigidContext {
                 &mut self.multibody_joints,
                 &mut self.soft_bodies,
                 &mut self.ccd,
-                &(),
+                &SurfaceFilter,
                 &(),
             )
         });

@@ -33,6 +33,7 @@
 //! (`contact_thickness`); see [`validate_object`].
 
 mod geometry;
+pub mod rigid_side;
 
 use std::sync::Arc;
 

@@ -16,6 +16,7 @@ use nalgebra::{Isometry3, Vector3};
 use crate::app::SimErrors;
 use crate::codec::{Decoder, Encoder, Persist, StateError};
 use crate::components::{DeformableNodes, Object};
+use crate::contact::rigid_side::{RigidSurfaces, SurfaceSync, WithoutRigidSide};
 use crate::contact::{deliver, ContactImpulses, ContactRefresh, DeformableContacts};
 use crate::coupling::{ContactQuery, GripperState, Grippers, NoColliders, Reaction};
 use crate::rigid::{DeformableSystems, RigidContext};
@@ -230,6 +231,7 @@ fn deformable_step<S: DeformableSolver>(
     mut errors: ResMut<SimErrors>,
     mut contacts: Option<ResMut<DeformableContacts>>,
     mut impulses: Option<ResMut<ContactImpulses>>,
+    rigid_surfaces: Option<Res<RigidSurfaces>>,
     names: Query<&Object>,
 ) {
     // Substep index within the physics step; deformables step at the first of every stride.
@@ -282,15 +284,24 @@ fn deformable_step<S: DeformableSolver>(
             }
             let entity = body.entity;
             let name = || names.get(entity).map_or("?", |o| o.name.as_str());
-            let object = contacts.as_deref().and_then(|c| c.object_of(entity));
+            // impulses owed by other deformables' contacts or by rigid bodies' (rigid_side)
+            let object = names.get(entity).ok().map(|o| o.index);
             if let (Some(object), Some(j)) = (object, impulses.as_deref_mut()) {
                 if let Err(e) = deliver(j, object, &mut body.solver) {
                     errors.raise(format!("object \"{}\": contact impulses: {e}", name()));
                     continue;
                 }
             }
+            let without;
             let rigid_query: &dyn ContactQuery = match rigid.as_deref() {
-                Some(r) => r,
+                Some(r) => match rigid_surfaces.as_deref().and_then(|s| s.of(entity)) {
+                    // bodies lighter than this one resolve their contact with it themselves
+                    Some(s) => {
+                        without = WithoutRigidSide::new(r, r, s.mass);
+                        &without
+                    }
+                    None => r,
+                },
                 None => &NoColliders,
             };
             let surfaces = contacts
@@ -398,6 +409,7 @@ where
         .clone()
         .in_set(crate::app::SubstepSystems::Solve)
         .after(ContactRefresh)
+        .before(SurfaceSync)
         .before(crate::rigid::RigidSystems::Step);
     let writeback = set.clone().in_set(crate::app::PhysicsSystems::Writeback);
     match previous {
@@ -407,6 +419,7 @@ where
         }
         None => {
             crate::contact::add_contact_systems(app);
+            crate::contact::rigid_side::add_rigid_side_systems(app);
             app.configure_sets(crate::Substep, solve);
             app.configure_sets(crate::PhysicsStep, writeback);
         }

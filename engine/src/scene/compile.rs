@@ -716,6 +716,9 @@ pub(crate) fn spawn(model: &SceneModel, app: &mut SimApp) -> Result<(), SceneErr
             }
         }
     }
+    // after the scene's bodies, before the sections' (robots' links never resolve contacts
+    // with deformables themselves)
+    crate::contact::rigid_side::add_surface_colliders(&mut app.world);
     for section in &model.sections {
         section.handler.spawn(app, &section.compiled)?;
     }
