@@ -269,18 +269,31 @@ impl Entry {
         else {
             return;
         };
-        let (tri, w) = (&self.surface.triangles[t as usize], cp.weights);
-        let wm: [f64; 3] = std::array::from_fn(|k| w[k] * self.masses[tri[k] as usize].max(0.0));
-        let total: f64 = wm.iter().sum();
-        let share = if total > 0.0 {
-            wm.map(|x| x / total)
-        } else {
-            w
-        };
+        let tri = &self.surface.triangles[t as usize];
         let nodes = impulses.of(self.object, self.pos.len());
-        for (k, &i) in tri.iter().enumerate() {
-            nodes[i as usize] += impulse * share[k];
-        }
+        spread_over_corners(nodes, tri, cp.weights, &self.masses, impulse);
+    }
+}
+
+/// Adds `impulse` (N s) to the corners `tri` of a surface's nodes, shared in proportion to the
+/// contact point's barycentric weights `w` times the corners' masses: every corner gets the same
+/// velocity change and the momentum is the impulse's (by weight alone when the masses are zero).
+fn spread_over_corners(
+    nodes: &mut [Vector3<f64>],
+    tri: &[u32; 3],
+    w: [f64; 3],
+    masses: &[f64],
+    impulse: &Vector3<f64>,
+) {
+    let wm: [f64; 3] = std::array::from_fn(|k| w[k] * masses[tri[k] as usize].max(0.0));
+    let total: f64 = wm.iter().sum();
+    let share = if total > 0.0 {
+        wm.map(|x| x / total)
+    } else {
+        w
+    };
+    for (k, &i) in tri.iter().enumerate() {
+        nodes[i as usize] += impulse * share[k];
     }
 }
 
@@ -407,11 +420,6 @@ impl DeformableContacts {
             contacts: self,
             targets: &e.targets,
         })
-    }
-
-    /// The scene object index of a body's surface.
-    pub fn object_of(&self, entity: Entity) -> Option<u32> {
-        self.find(entity).map(|k| self.entries[k].object)
     }
 
     /// After `entity` stepped: takes the reactions on other deformables out of `reactions`

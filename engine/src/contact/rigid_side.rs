@@ -29,7 +29,7 @@ use nalgebra::Vector3;
 use rapier3d::parry::query::PointQueryWithLocation;
 use rapier3d::prelude::*;
 
-use super::{closest_on_triangle, ContactImpulses, ContactSurface, RigidPart};
+use super::{closest_on_triangle, spread_over_corners, ContactImpulses, ContactSurface, RigidPart};
 use crate::components::Object;
 use crate::coupling::{ContactQuery, PointContact};
 use crate::deformable::solver::deformable_ref;
@@ -212,51 +212,16 @@ pub(crate) fn surface_reactions(world: &mut World) {
             continue;
         };
         let mut impulses: Option<Vec<Vector3<f64>>> = None;
-        for pair in rigid.narrow_phase.contact_pairs_with(s.collider) {
-            let first = pair.collider1 == s.collider;
-            // what the solver solved: a composite shape's manifolds merged by normal, so the
-            // touched triangle is found again from the contact point
-            for m in pair.solver_manifolds() {
-                let n = vec_from_rapier(m.data.normal);
-                // the points the solver used (the others carry copied warm-start data only)
-                let used = m.data.solver_contacts.iter().filter_map(|sc| {
-                    let id = sc.contact_id[0] & !rapier3d::geometry::NEW_CONTACT_BIT;
-                    m.points.get(id as usize)
-                });
-                for p in used {
-                    // rapier pushes the first collider's body by -normal x impulse plus the
-                    // friction impulse `warmstart_tangent_world`; the second by the opposite
-                    let on_first = -n * f64::from(p.data.impulse)
-                        + vec_from_rapier(p.data.warmstart_tangent_world);
-                    let (j, at) = if first {
-                        (on_first, p.local_p1)
-                    } else {
-                        (-on_first, p.local_p2)
-                    };
-                    if j == Vector3::zeros() {
-                        continue;
-                    }
-                    // the surface collider sits at the world origin: its local points are world points
-                    let (_, (t, _)) = mesh.project_local_point_and_get_location(at, false);
-                    let Some(tri) = surface.triangles.get(t as usize) else {
-                        continue;
-                    };
-                    let [a, b, c] = tri.map(|i| nodes[i as usize]);
-                    let w = closest_on_triangle(&vec_from_rapier(at), &a, &b, &c).weights;
-                    let wm: [f64; 3] =
-                        std::array::from_fn(|k| w[k] * masses[tri[k] as usize].max(0.0));
-                    let total: f64 = wm.iter().sum();
-                    let share = if total > 0.0 {
-                        wm.map(|x| x / total)
-                    } else {
-                        w
-                    };
-                    let out = impulses.get_or_insert_with(|| vec![Vector3::zeros(); nodes.len()]);
-                    for (k, &i) in tri.iter().enumerate() {
-                        out[i as usize] += j * share[k];
-                    }
-                }
-            }
+        for (at, j) in impulses_on(rigid, s.collider) {
+            // the surface collider sits at the world origin: its local points are world points
+            let (_, (t, _)) = mesh.project_local_point_and_get_location(at, false);
+            let Some(tri) = surface.triangles.get(t as usize) else {
+                continue;
+            };
+            let [a, b, c] = tri.map(|i| nodes[i as usize]);
+            let w = closest_on_triangle(&vec_from_rapier(at), &a, &b, &c).weights;
+            let out = impulses.get_or_insert_with(|| vec![Vector3::zeros(); nodes.len()]);
+            spread_over_corners(out, tri, w, masses, &j);
         }
         if let Some(j) = impulses {
             owed.push((s.object, j));
@@ -274,6 +239,40 @@ pub(crate) fn surface_reactions(world: &mut World) {
     }
 }
 
+/// The impulses (N s, world frame) rapier's last step applied to surface collider `collider`,
+/// non-zero ones only, each with its contact point on the surface (in the collider's frame).
+fn impulses_on(
+    rigid: &RigidContext,
+    collider: ColliderHandle,
+) -> impl Iterator<Item = (rapier3d::math::Vector, Vector3<f64>)> + '_ {
+    rigid
+        .narrow_phase
+        .contact_pairs_with(collider)
+        .flat_map(move |pair| {
+            let first = pair.collider1 == collider;
+            // what the solver solved: a composite shape's manifolds merged by normal (so the
+            // touched triangle is found again from the contact point)
+            pair.solver_manifolds().iter().flat_map(move |m| {
+                let n = vec_from_rapier(m.data.normal);
+                // the points the solver used (the others carry copied warm-start data only)
+                m.data.solver_contacts.iter().filter_map(move |sc| {
+                    let id = sc.contact_id[0] & !rapier3d::geometry::NEW_CONTACT_BIT;
+                    let p = m.points.get(id as usize)?;
+                    // rapier pushes the first collider's body by -normal x impulse plus the
+                    // friction impulse `warmstart_tangent_world`; the second by the opposite
+                    let on_first = -n * f64::from(p.data.impulse)
+                        + vec_from_rapier(p.data.warmstart_tangent_world);
+                    let (j, at) = if first {
+                        (on_first, p.local_p1)
+                    } else {
+                        (-on_first, p.local_p2)
+                    };
+                    (j != Vector3::zeros()).then_some((at, j))
+                })
+            })
+        })
+}
+
 /// A deformable's rigid query without the bodies that resolve their contact with it themselves
 /// (their colliders still answer; their contacts are dropped).
 pub struct WithoutRigidSide<'a> {
@@ -283,10 +282,10 @@ pub struct WithoutRigidSide<'a> {
 }
 
 impl<'a> WithoutRigidSide<'a> {
-    /// `inner` (the rigid world's query) for a deformable of total mass `mass` kg.
-    pub fn new(inner: &'a dyn ContactQuery, rigid: &'a RigidContext, mass: f64) -> Self {
+    /// The rigid world's query for a deformable of total mass `mass` kg.
+    pub fn new(rigid: &'a RigidContext, mass: f64) -> Self {
         Self {
-            inner: RigidPart::Borrowed(inner),
+            inner: RigidPart::Borrowed(rigid),
             rigid,
             mass,
         }

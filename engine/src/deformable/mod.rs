@@ -297,7 +297,7 @@ fn deformable_step<S: DeformableSolver>(
                 Some(r) => match rigid_surfaces.as_deref().and_then(|s| s.of(entity)) {
                     // bodies lighter than this one resolve their contact with it themselves
                     Some(s) => {
-                        without = WithoutRigidSide::new(r, r, s.mass);
+                        without = WithoutRigidSide::new(r, s.mass);
                         &without
                     }
                     None => r,
