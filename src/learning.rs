@@ -46,6 +46,8 @@ pub struct SimEnv {
     pub env_seconds: f64,
     /// Reward of a terminal failure; `None`: failures truncate.
     error_penalty: Option<f32>,
+    /// Reward added to the step on which the task ends an episode as failed.
+    failure_penalty: Option<f32>,
 }
 
 impl SimEnv {
@@ -81,6 +83,7 @@ impl SimEnv {
             last_obs: Vec::new(),
             env_seconds: 0.0,
             error_penalty: None,
+            failure_penalty: None,
         })
     }
 
@@ -88,6 +91,13 @@ impl SimEnv {
     /// instead of truncating them; `None` truncates (see [`SimEnv`]).
     pub fn with_error_penalty(mut self, penalty: Option<f32>) -> Self {
         self.error_penalty = penalty;
+        self
+    }
+
+    /// Adds `penalty` to the reward of the step on which the task ends an episode as failed
+    /// (terminated by a termination term, not by success or an error); `None` adds nothing.
+    pub fn with_failure_penalty(mut self, penalty: Option<f32>) -> Self {
+        self.failure_penalty = penalty;
         self
     }
 }
@@ -137,8 +147,10 @@ impl VecEnvironment for SimEnv {
         let dim = self.obs_dim;
         for (i, info) in out.infos.into_iter().enumerate() {
             // an episode ended by an error failed, where the task defines success
-            step.success
-                .push(info.episode.and_then(|e| e.success.map(|s| s && !e.error)));
+            let success = info
+                .episode
+                .and_then(|e| e.success.map(|s| s && !e.error));
+            step.success.push(success);
             if info.error.is_some() {
                 match self.error_penalty {
                     Some(penalty) => {
@@ -154,6 +166,11 @@ impl VecEnvironment for SimEnv {
                 let before = self.last_obs.get(i * dim..(i + 1) * dim);
                 step.final_obs.push(before.map(<[f32]>::to_vec));
                 continue;
+            }
+            if let (Some(penalty), true, Some(false)) =
+                (self.failure_penalty, step.terminated[i], success)
+            {
+                step.rewards[i] += penalty;
             }
             step.final_obs.push(info.final_observation.map(|mut o| {
                 for v in o.iter_mut().filter(|v| !v.is_finite()) {
@@ -317,7 +334,8 @@ pub fn train(
     let vec = make::make_vec(&req.target, &opts, req.envs.max(1), req.threads)?;
     let mut env = SimEnv::new(vec, &req.target, req.actions.as_deref())
         .map_err(MakeError::Input)?
-        .with_error_penalty(cfg.error_penalty());
+        .with_error_penalty(cfg.error_penalty())
+        .with_failure_penalty(cfg.failure_penalty());
     let note = json!({"target": req.target, "actions": req.actions, "algo": req.algo,
                       "envs": req.envs, "command": req.command})
     .to_string();

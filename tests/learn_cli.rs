@@ -244,3 +244,42 @@ fn an_episode_ended_by_an_error_is_a_cut_that_bootstraps_from_the_state_before_o
     assert_eq!((p2.rewards[0], p2.rewards[1]), (-250.0, s2.rewards[1]));
     assert_eq!(p2.final_obs[0].as_deref(), Some(&s1.obs[..dim]));
 }
+
+#[test]
+fn a_failure_penalty_is_added_to_the_step_on_which_the_task_ends_an_episode_as_failed() {
+    use modesuite::learn::VecEnvironment;
+    // Franka Lift driving forward: the belt it holds reaches the base's hull box, a
+    // termination term (`belt_on_body`), which ends the episode as failed
+    let run = |penalty: Option<f32>| {
+        let vec = modesuite::make::make_vec(
+            "MoDe-Franka-Lift-v0",
+            &modesuite::make::MakeOptions::default(),
+            1,
+            1,
+        )
+        .unwrap();
+        let mut env = modesuite::learning::SimEnv::new(vec, "MoDe-Franka-Lift-v0", None)
+            .unwrap()
+            .with_failure_penalty(penalty);
+        env.reset(0).unwrap();
+        let mut forward = vec![0.0f32; env.act_dim()];
+        forward[0] = 1.0;
+        let mut rewards = Vec::new();
+        for _ in 0..200 {
+            let s = env.step(&forward).unwrap();
+            rewards.push(s.rewards[0]);
+            if s.terminated[0] || s.truncated[0] {
+                assert_eq!((s.terminated[0], s.success[0]), (true, Some(false)));
+                return rewards;
+            }
+        }
+        panic!("driving into the belt did not end the episode in 200 steps");
+    };
+    let plain = run(None);
+    let penalised = run(Some(-300.0));
+    let n = plain.len();
+    println!("Franka Lift driving forward fails at step {n}; last reward {} -> {} with the penalty", plain[n - 1], penalised[n - 1]);
+    assert_eq!(penalised.len(), n);
+    assert_eq!(penalised[..n - 1], plain[..n - 1]);
+    assert_eq!(penalised[n - 1], plain[n - 1] - 300.0);
+}

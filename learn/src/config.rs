@@ -71,6 +71,14 @@ pub struct PpoConfig {
     /// (about the worst step reward / (1 - gamma)). Applied by the simulator's training env
     /// (`modesuite train`); set per task in its `<algo>.ron`.
     pub error_penalty: Option<f32>,
+    /// What an episode the task ends as failed teaches (a termination term fired: Lift's belt
+    /// on the robot's body, say). `None` (default): nothing beyond the task's rewards. In a task
+    /// whose every step costs (the distance rewards), ending early pays, and a policy learns to
+    /// fail at once (PPO on Franka Lift ended every episode after 13 steps). `Some(r)`: `r` is
+    /// added to the failing step's reward; like `error_penalty` it should be below the
+    /// discounted return of going on. Applied by the simulator's training env; set per task in
+    /// its `<algo>.ron`.
+    pub failure_penalty: Option<f32>,
 }
 
 impl Default for PpoConfig {
@@ -101,6 +109,7 @@ impl Default for PpoConfig {
             bootstrap_truncation: true,
             init_log_std: 0.0,
             error_penalty: None,
+            failure_penalty: None,
         }
     }
 }
@@ -155,6 +164,14 @@ pub struct SacConfig {
     /// (about the worst step reward / (1 - gamma)). Applied by the simulator's training env
     /// (`modesuite train`); set per task in its `<algo>.ron`.
     pub error_penalty: Option<f32>,
+    /// What an episode the task ends as failed teaches (a termination term fired: Lift's belt
+    /// on the robot's body, say). `None` (default): nothing beyond the task's rewards. In a task
+    /// whose every step costs (the distance rewards), ending early pays, and a policy learns to
+    /// fail at once (PPO on Franka Lift ended every episode after 13 steps). `Some(r)`: `r` is
+    /// added to the failing step's reward; like `error_penalty` it should be below the
+    /// discounted return of going on. Applied by the simulator's training env; set per task in
+    /// its `<algo>.ron`.
+    pub failure_penalty: Option<f32>,
 }
 
 impl Default for SacConfig {
@@ -179,6 +196,7 @@ impl Default for SacConfig {
             grad_norm: None,
             steps_per_iteration: 1000,
             error_penalty: None,
+            failure_penalty: None,
         }
     }
 }
@@ -218,6 +236,15 @@ impl AlgoConfig {
         }
     }
 
+    /// The reward added to the step on which the task ends an episode as failed (see
+    /// [`PpoConfig::failure_penalty`]).
+    pub fn failure_penalty(&self) -> Option<f32> {
+        match self {
+            AlgoConfig::Ppo(c) => c.failure_penalty,
+            AlgoConfig::Sac(c) => c.failure_penalty,
+        }
+    }
+
     /// Sets the seed.
     pub fn set_seed(&mut self, seed: u64) {
         match self {
@@ -242,6 +269,7 @@ impl AlgoConfig {
                     c.obs_clip,
                     c.init_log_std,
                     c.error_penalty.unwrap_or(0.0),
+                    c.failure_penalty.unwrap_or(0.0),
                 ];
                 if floats.iter().any(|v| !v.is_finite()) || !c.learning_rate.is_finite() {
                     return bad("ppo: every number must be finite");
@@ -267,6 +295,7 @@ impl AlgoConfig {
                     c.log_std_bounds.0,
                     c.log_std_bounds.1,
                     c.error_penalty.unwrap_or(0.0),
+                    c.failure_penalty.unwrap_or(0.0),
                 ];
                 if floats.iter().any(|v| !v.is_finite())
                     || ![c.actor_lr, c.critic_lr, c.alpha_lr]
