@@ -147,9 +147,7 @@ impl VecEnvironment for SimEnv {
         let dim = self.obs_dim;
         for (i, info) in out.infos.into_iter().enumerate() {
             // an episode ended by an error failed, where the task defines success
-            let success = info
-                .episode
-                .and_then(|e| e.success.map(|s| s && !e.error));
+            let success = info.episode.and_then(|e| e.success.map(|s| s && !e.error));
             step.success.push(success);
             if info.error.is_some() {
                 match self.error_penalty {

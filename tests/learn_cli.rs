@@ -278,7 +278,11 @@ fn a_failure_penalty_is_added_to_the_step_on_which_the_task_ends_an_episode_as_f
     let plain = run(None);
     let penalised = run(Some(-300.0));
     let n = plain.len();
-    println!("Franka Lift driving forward fails at step {n}; last reward {} -> {} with the penalty", plain[n - 1], penalised[n - 1]);
+    println!(
+        "Franka Lift driving forward fails at step {n}; last reward {} -> {} with the penalty",
+        plain[n - 1],
+        penalised[n - 1]
+    );
     assert_eq!(penalised.len(), n);
     assert_eq!(penalised[..n - 1], plain[..n - 1]);
     assert_eq!(penalised[n - 1], plain[n - 1] - 300.0);

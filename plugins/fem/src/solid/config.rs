@@ -178,6 +178,10 @@ pub struct StepStats {
     pub factorizations: usize,
     /// Times the step (or a part of it) was split into two halves because its solve failed.
     pub halvings: usize,
+    /// Nodes moved out of a collider after the solve, by more than the solve's tolerance,
+    /// because the active-set rounds ran out with them inside (and not in the contact set): a
+    /// correction the elastic solution did not see, which shows as a velocity kick.
+    pub projected: usize,
 }
 
 /// Where a rest-frame point sits in the mesh: element and shape-function weights, so its current

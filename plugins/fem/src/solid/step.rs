@@ -2,8 +2,8 @@
 //! reactions), step splitting on failure, and the static solves.
 
 use super::{
-    finite3, Candidate, ConKind, ContactMemory, FemSolid, Problem, StepStats, FACING_COS,
-    FRICTION_RTOL, MAX_STEP_HALVINGS, SLIP_SPEED,
+    finite3, Candidate, ConKind, ContactMemory, FemSolid, Problem, StepStats, ACTIVATION_ROUNDS,
+    FACING_COS, FRICTION_RTOL, MAX_STEP_HALVINGS, SLIP_SPEED,
 };
 use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::error::FemError;
@@ -127,6 +127,7 @@ impl FemSolid {
                     factorizations: a.factorizations + b.factorizations,
                     slipping_grasps: a.slipping_grasps.max(b.slipping_grasps),
                     halvings: 1 + a.halvings + b.halvings,
+                    projected: a.projected + b.projected,
                     ..b
                 })
             }
@@ -331,8 +332,11 @@ impl FemSolid {
         // tolerance, and that step's inertial force) starts no new round.
         let pen_tol = self.config.newton_tolerance * self.model.length_scale;
         let max_rounds = 6;
-        for round in 0..max_rounds {
-            let last = round + 1 == max_rounds;
+        for round in 0..max_rounds + ACTIVATION_ROUNDS {
+            // from the last round on, contacts are neither released nor change their friction
+            let last = round + 1 >= max_rounds;
+            // and after the activation rounds, nothing starts another round
+            let activate = round + 1 < max_rounds + ACTIVATION_ROUNDS;
             for i in 0..n {
                 self.fric[i] = Vector3::zeros();
             }
@@ -414,7 +418,7 @@ impl FemSolid {
                     }
                 } else {
                     let gap = (self.pos[i] - c.contact.point).dot(&nrm);
-                    if gap < -pen_tol && !last {
+                    if gap < -pen_tol && activate {
                         let cc = &mut self.candidates[ci];
                         cc.active = true;
                         cc.stick = cc.contact.friction > 0.0;
@@ -460,6 +464,7 @@ impl FemSolid {
             if !c.active {
                 let gap = (self.pos[i] - c.contact.point).dot(&nrm);
                 if gap < 0.0 {
+                    stats.projected += usize::from(gap < -pen_tol);
                     self.pos[i] -= nrm * gap;
                 }
                 continue;
