@@ -421,7 +421,15 @@ impl FemSolid {
                     if gap < -pen_tol && activate {
                         let cc = &mut self.candidates[ci];
                         cc.active = true;
-                        cc.stick = cc.contact.friction > 0.0;
+                        // from the last round on no contact can start sliding, so one joining
+                        // then takes the normal only (what projecting it out used to do): stuck,
+                        // it could hold more than its friction cone (a torus resting on the
+                        // ground trembled and let a box on it creep)
+                        cc.stick = cc.contact.friction > 0.0 && !last;
+                        if last {
+                            cc.slip_dir = Vector3::zeros();
+                            cc.friction_force = Vector3::zeros();
+                        }
                         cc.secant = None;
                         changed = true;
                     }
