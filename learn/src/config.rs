@@ -164,13 +164,8 @@ pub struct SacConfig {
     /// (about the worst step reward / (1 - gamma)). Applied by the simulator's training env
     /// (`modesuite train`); set per task in its `<algo>.ron`.
     pub error_penalty: Option<f32>,
-    /// What an episode the task ends as failed teaches (a termination term fired: Lift's belt
-    /// on the robot's body, say). `None` (default): nothing beyond the task's rewards. In a task
-    /// whose every step costs (the distance rewards), ending early pays, and a policy learns to
-    /// fail at once (PPO on Franka Lift ended every episode after 13 steps). `Some(r)`: `r` is
-    /// added to the failing step's reward; like `error_penalty` it should be below the
-    /// discounted return of going on. Applied by the simulator's training env; set per task in
-    /// its `<algo>.ron`.
+    /// Reward added to the step on which the task ends an episode as failed, as
+    /// [`PpoConfig::failure_penalty`] (default `None`).
     pub failure_penalty: Option<f32>,
 }
 

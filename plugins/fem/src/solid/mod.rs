@@ -202,7 +202,8 @@ const FACING_COS: f64 = 0.05;
 /// collider one by one after the solve: a 1.9x-stretched belt swinging into a post at 2 m/s
 /// ran out of rounds (contacts activated and released in turn) with four nodes 1.4-2 cm deep,
 /// whose projection left the belt at 47 m/s and blew it up on the next step (PPO Spot Drag,
-/// seed 1,000,000). Activation only is monotone: each such round adds contacts.
+/// seed 1,000,000). Activation only is monotone: each such round adds contacts. A contact
+/// joining from the last full round on takes its normal only (no round is left to let it slide).
 const ACTIVATION_ROUNDS: usize = 8;
 
 /// How often a step whose solve fails may be halved (at most `2^MAX_STEP_HALVINGS` parts).
