@@ -66,6 +66,10 @@ fn cases() -> Vec<(&'static str, String)> {
             example(include_str!("../scenes/examples/box_on_torus.scene.ron")),
         ),
         (
+            "box_across_belt",
+            example(include_str!("../scenes/examples/box_across_belt.scene.ron")),
+        ),
+        (
             // the box (0.5 kg) is lighter than the block (2.7 kg): the rigid solver resolves it
             "K_box_on_block",
             k_scene(

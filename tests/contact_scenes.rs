@@ -535,3 +535,49 @@ fn rigid_side_contacts_are_bit_identical_for_thread_counts_and_through_state_fil
     // saved while the box is in contact and impulses are owed to the torus
     continues_exactly_through_a_state_file(file, 30, 30);
 }
+
+#[test]
+fn a_box_pushed_across_a_belt_lying_on_the_ground_slides_as_coulomb_friction_predicts() {
+    // the box (0.5 kg) is lighter than the belt (0.79 kg): the rigid solver resolves the pair
+    // against the belt's surface collider, whose internal edges are fixed (with plain
+    // triangles the box's leading edge caught on them at the second step, pitched it up at
+    // 7 rad/s and stopped it after 25 mm)
+    let file = "scenes/examples/box_across_belt.scene.ron";
+    let h = Vector3::new(0.05, 0.05, 0.05);
+    let mut belt_start = None;
+    let (mut env, d) = drop_box(file, "belt", h, 0.06, |env, i| {
+        if i == 1 {
+            belt_start = Some(nodes(env, "belt"));
+        }
+    });
+    let belt_start = belt_start.unwrap();
+    let (pose, box_speed) = rigid(&mut env, "box");
+    let speed = rest_speed(&mut env, &["belt"]).max(box_speed);
+    let belt_moved = nodes(&mut env, "belt")
+        .iter()
+        .zip(&belt_start)
+        .map(|(p, q)| (p - q).xy().norm())
+        .fold(0.0, f64::max);
+    let p = pose.translation.vector;
+    // pushed at 1 m/s from x = -0.3 m, mu = 0.5 (the box's and the belt's material)
+    let coulomb = 1.0 / (2.0 * 0.5 * 9.81);
+    let slid = p.x + 0.3;
+    println!(
+        "box across belt, 60 s: slid {:.2} mm (Coulomb v^2 / (2 mu g) {:.2} mm, ratio {:.3}, within 5 %), box bottom at {:.5} m (the belt's top 0.004 m, within 0.5 mm), belt moved at most {:.3} mm on the ground (< 1 mm: the box's friction is less than the ground's), deepest belt node inside the box {:.3} mm and box point inside the belt {:.3} mm (<= 2 mm), fastest box speed {:.3} m/s (< 1.01: the push), rest speed {speed:.2e} m/s (< 1e-2)",
+        slid * 1e3,
+        coulomb * 1e3,
+        slid / coulomb,
+        p.z - h.z,
+        belt_moved * 1e3,
+        d.nodes_in_box * 1e3,
+        d.box_in_soft * 1e3,
+        d.fastest,
+    );
+    assert!((slid / coulomb - 1.0).abs() < 0.05, "slide distance");
+    assert!(
+        (p.z - h.z - 0.004).abs() < 5e-4,
+        "the box is not on the belt"
+    );
+    assert!(belt_moved < 1e-3, "the belt slid on the ground");
+    d.assert_rests(1.01, speed);
+}

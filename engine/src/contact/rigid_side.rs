@@ -63,10 +63,12 @@ impl RigidSurfaces {
 }
 
 /// The surface `triangles` over `nodes` as a rapier shape (`None` for a surface rapier refuses:
-/// no triangles, or all degenerate).
+/// no triangles, or all degenerate), with its internal edges fixed (contact normals on an edge
+/// limited by the neighbouring triangles': a box sliding over a flat belt caught on the edges
+/// between its facets). Only duplicate vertices are merged, so triangle indices are kept.
 fn surface_shape(nodes: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Option<SharedShape> {
     let v: Vec<_> = nodes.iter().map(vec_to_rapier).collect();
-    SharedShape::trimesh(v, triangles.to_vec()).ok()
+    SharedShape::trimesh_with_flags(v, triangles.to_vec(), TriMeshFlags::FIX_INTERNAL_EDGES).ok()
 }
 
 /// After a scene spawned (its rigid bodies and deformables): gives a surface collider to every
