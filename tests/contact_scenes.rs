@@ -406,7 +406,7 @@ fn box_points(pose: &nalgebra::Isometry3<f64>, h: Vector3<f64>) -> Vec<Vector3<f
     out
 }
 
-/// Drops the box of `file` onto the deformable `soft` and runs 60 s, measuring every step the
+/// Runs the box of `file` (dropped onto, or set and pushed on, the deformable `soft`) for 60 s, measuring every step the
 /// box's fastest speed, its highest centre after it first landed (slower than 0.2 m/s below
 /// `landed_below` m) and, every 30 steps, the deepest node of `soft` inside the box (half extents
 /// `h`) and the deepest point of the box's surface inside `soft`; `at` is called every step.
