@@ -62,12 +62,24 @@ fn cases() -> Vec<(&'static str, String)> {
             example(include_str!("../scenes/examples/box_on_foam.scene.ron")),
         ),
         (
+            "medium_box_on_foam",
+            example(include_str!(
+                "../scenes/examples/medium_box_on_foam.scene.ron"
+            )),
+        ),
+        (
             "box_on_torus",
             example(include_str!("../scenes/examples/box_on_torus.scene.ron")),
         ),
         (
             "box_across_belt",
             example(include_str!("../scenes/examples/box_across_belt.scene.ron")),
+        ),
+        (
+            "heavy_box_across_belt",
+            example(include_str!(
+                "../scenes/examples/heavy_box_across_belt.scene.ron"
+            )),
         ),
         (
             // the box (0.5 kg) is lighter than the block (2.7 kg): the rigid solver resolves it

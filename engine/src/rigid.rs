@@ -20,6 +20,7 @@ use rapier3d::prelude::*;
 use crate::app::{PhysicsSystems, Plugin, SimErrors, SubstepSystems};
 use crate::codec::{Decoder, Encoder, Persist, StateError};
 use crate::components::{Object, Pose, Velocity};
+use crate::contact::rigid_side::{body_resolves, rigid_resolves};
 use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::math::{
     interpolate_pose, pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier,
@@ -101,30 +102,23 @@ pub fn surface_of(user_data: u128) -> Option<(u32, f64)> {
     })
 }
 
-/// Whether a rigid body whose collider carries `tag` resolves its contact with a deformable of
-/// total mass `surface_mass` itself: a dynamic scene body lighter than the deformable. Then the
-/// rigid solver treats the deformable's surface as a collider and the deformable is handed the
-/// reaction; otherwise the deformable resolves the contact (the coupling scheme of
-/// [`crate::contact`]: the lighter side resolves).
-fn rigid_resolves(body: &RigidBody, tag: u128, surface_mass: f64) -> bool {
-    tag == SCENE_BODY_TAG && body.is_dynamic() && f64::from(body.mass()) < surface_mass
-}
-
 /// rapier's pair filter for deformable surfaces' colliders (they carry
 /// `ActiveHooks::FILTER_CONTACT_PAIRS`; other pairs are never asked): a surface touches the
-/// bodies that resolve their contact with it ([`rigid_resolves`]) and nothing else.
-struct SurfaceFilter;
+/// bodies that resolve their contact with it (`rigid_side::body_resolves`) and nothing else.
+struct SurfaceFilter<'a>(&'a [(u32, RigidBodyHandle, bool)]);
 
-impl PhysicsHooks for SurfaceFilter {
+impl PhysicsHooks for SurfaceFilter<'_> {
     fn filter_contact_pair(&self, c: &PairFilterContext) -> Option<SolverFlags> {
         let (c1, c2) = (c.colliders.get(c.collider1)?, c.colliders.get(c.collider2)?);
-        let (mass, other, body) = match (surface_of(c1.user_data), surface_of(c2.user_data)) {
-            (Some((_, m)), None) => (m, c2, c.rigid_body2?),
-            (None, Some((_, m))) => (m, c1, c.rigid_body1?),
-            _ => return None,
-        };
-        let body = c.bodies.get(body)?;
-        rigid_resolves(body, other.user_data, mass).then_some(SolverFlags::COMPUTE_RIGID_IMPULSES)
+        let ((object, mass), other, handle) =
+            match (surface_of(c1.user_data), surface_of(c2.user_data)) {
+                (Some(s), None) => (s, c2, c.rigid_body2?),
+                (None, Some(s)) => (s, c1, c.rigid_body1?),
+                _ => return None,
+            };
+        let body = c.bodies.get(handle)?;
+        body_resolves(self.0, body, handle, other.user_data, object, mass)
+            .then_some(SolverFlags::COMPUTE_RIGID_IMPULSES)
     }
 }
 
@@ -159,6 +153,11 @@ pub struct RigidContext {
     /// Pose of every body id at the start of the last rapier step (empty after bodies were
     /// moved outside a step): what [`RigidContext::body_pose_between`] interpolates from.
     step_start: Vec<Isometry3<f64>>,
+    /// `(surface object, body, the body resolves)`: the sides of the pairs in which a dynamic
+    /// scene body presses a deformable onto a support in this physics step
+    /// ([`crate::contact::support`]; other pairs go by mass); derived from the positions at
+    /// each physics step's start, so not part of the state.
+    sides: Vec<(u32, RigidBodyHandle, bool)>,
     /// Query acceleration: a BVH over the colliders' current AABBs, leaf -> collider.
     query_bvh: Bvh,
     query_leaves: Vec<QueryLeaf>,
@@ -210,6 +209,7 @@ impl RigidContext {
             body_ids: Vec::new(),
             pending: Vec::new(),
             step_start: Vec::new(),
+            sides: Vec::new(),
             query_bvh: Bvh::new(),
             query_leaves: Vec::new(),
             queries_stale: true,
@@ -280,25 +280,66 @@ impl RigidContext {
         self.body_ids.get(id as usize).copied()
     }
 
-    /// Whether body id `body` resolves its contact with a deformable of total mass
-    /// `surface_mass` kg itself (then the deformable leaves that body out of its own contacts;
-    /// [`crate::contact::rigid_side`]).
-    pub fn resolves_with_surface(&self, body: u32, surface_mass: f64) -> bool {
-        let Some(b) = self.body_of_id(body).and_then(|(h, _)| self.bodies.get(h)) else {
-            return false;
-        };
-        let tag = b
-            .colliders()
+    /// The `user_data` of a body's first collider (robots' links: 0; [`SCENE_BODY_TAG`]).
+    fn tag_of(&self, b: &RigidBody) -> u128 {
+        b.colliders()
             .first()
             .and_then(|c| self.colliders.get(*c))
-            .map_or(0, |c| c.user_data);
-        rigid_resolves(b, tag, surface_mass)
+            .map_or(0, |c| c.user_data)
     }
 
-    /// Whether any dynamic scene body is lighter than `surface_mass` kg (so a deformable of
-    /// that mass needs a surface collider).
+    /// Whether body id `body` resolves its contact with the deformable of scene object `object`
+    /// (total mass `surface_mass` kg) itself (by mass, or as chosen for a deformable on a
+    /// support; then the deformable leaves that body out of its own contacts;
+    /// [`crate::contact::rigid_side`], [`crate::contact::support`]).
+    pub fn resolves_with_surface(&self, body: u32, object: u32, surface_mass: f64) -> bool {
+        let Some((h, b)) = self
+            .body_of_id(body)
+            .and_then(|(h, _)| Some((h, self.bodies.get(h)?)))
+        else {
+            return false;
+        };
+        body_resolves(&self.sides, b, h, self.tag_of(b), object, surface_mass)
+    }
+
+    /// Whether any dynamic scene body is lighter than `surface_mass` kg (such a body always
+    /// resolves its contact with a deformable of that mass).
     pub fn any_resolves_with_surface(&self, surface_mass: f64) -> bool {
-        (0..self.body_ids.len() as u32).any(|id| self.resolves_with_surface(id, surface_mass))
+        self.body_ids.iter().any(|(h, _)| {
+            self.bodies
+                .get(*h)
+                .is_some_and(|b| rigid_resolves(b, self.tag_of(b), surface_mass))
+        })
+    }
+
+    /// The dynamic scene bodies (not robots' links) of at least `mass` kg, in body-id order:
+    /// handle and mass.
+    pub fn scene_bodies_from(&self, mass: f64) -> Vec<(RigidBodyHandle, f64)> {
+        self.body_ids
+            .iter()
+            .filter_map(|(h, _)| {
+                let b = self.bodies.get(*h)?;
+                let m = f64::from(b.mass());
+                (b.is_dynamic() && self.tag_of(b) == SCENE_BODY_TAG && m >= mass).then_some((*h, m))
+            })
+            .collect()
+    }
+
+    /// Sets the sides `(surface object, body, the body resolves)` of the pairs on a support in
+    /// this physics step ([`crate::contact::support`]).
+    pub fn set_sides(&mut self, sides: Vec<(u32, RigidBodyHandle, bool)>) {
+        self.sides = sides;
+    }
+
+    /// Whether any pair on a support has its side chosen in this physics step.
+    pub fn has_sides(&self) -> bool {
+        !self.sides.is_empty()
+    }
+
+    /// Whether some body resolves its contact with surface object `object` in this physics step
+    /// because it presses it onto a support.
+    pub fn is_supported(&self, object: u32) -> bool {
+        self.sides.iter().any(|s| s.0 == object && s.2)
     }
 
     /// Current pose (`world_from_body`) of a body id.
@@ -497,7 +538,7 @@ impl RigidContext {
                 &mut self.multibody_joints,
                 &mut self.soft_bodies,
                 &mut self.ccd,
-                &SurfaceFilter,
+                &SurfaceFilter(&self.sides),
                 &(),
             )
         });
@@ -784,6 +825,7 @@ impl RigidContext {
     }
 
     fn set_rigid_state(&mut self, s: RigidState) {
+        self.sides.clear();
         self.bodies = s.bodies;
         self.colliders = s.colliders;
         self.impulse_joints = s.impulse_joints;

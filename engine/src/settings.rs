@@ -49,6 +49,11 @@ pub struct SimSettings {
     /// step, above which the rigid physics is reported as blown up (the episode ends with an
     /// error naming the body).
     pub max_body_speed: f64,
+    /// Substeps the engine adds to every scene substep in the current physics step (1: none):
+    /// set at the start of each physics step from the stiffness of the deformables that
+    /// dynamic scene bodies heavier than them press onto supports
+    /// (`crate::contact::support`); never set by a scene.
+    pub coupling_substeps: u32,
 }
 
 /// Default of [`SimSettings::max_body_speed`] and the scene's `physics.max_body_speed`, m/s.
@@ -67,13 +72,25 @@ impl Default for SimSettings {
             deformable_stride: 1,
             deformable_inner: 1,
             max_body_speed: DEFAULT_MAX_BODY_SPEED,
+            coupling_substeps: 1,
         }
     }
 }
 
 impl SimSettings {
-    /// Substep length in seconds.
+    /// Substeps in the current physics step: the scene's times the engine's
+    /// [`SimSettings::coupling_substeps`].
+    pub fn step_substeps(&self) -> u32 {
+        self.substeps.max(1) * self.coupling_substeps.max(1)
+    }
+
+    /// Substep length in seconds (in the current physics step).
     pub fn substep_dt(&self) -> f64 {
+        self.dt / f64::from(self.step_substeps())
+    }
+
+    /// The scene's substep length in seconds, without the engine's coupling substeps.
+    pub fn scene_substep_dt(&self) -> f64 {
         self.dt / f64::from(self.substeps.max(1))
     }
 }

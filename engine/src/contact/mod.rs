@@ -34,6 +34,7 @@
 
 mod geometry;
 pub mod rigid_side;
+pub mod support;
 
 use std::sync::Arc;
 

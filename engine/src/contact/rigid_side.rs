@@ -34,7 +34,7 @@ use crate::components::Object;
 use crate::coupling::{ContactQuery, PointContact};
 use crate::deformable::solver::deformable_ref;
 use crate::math::{vec_from_rapier, vec_to_rapier};
-use crate::rigid::{surface_user_data, RigidContext};
+use crate::rigid::{surface_user_data, RigidContext, SCENE_BODY_TAG};
 
 /// The deformable surfaces that have a collider in the rigid world (a resource inserted at
 /// spawn when there is one; it never changes, so it is not part of the env state: a state file
@@ -66,7 +66,7 @@ impl RigidSurfaces {
 /// no triangles, or all degenerate), with its internal edges fixed (contact normals on an edge
 /// limited by the neighbouring triangles': a box sliding over a flat belt caught on the edges
 /// between its facets). Only duplicate vertices are merged, so triangle indices are kept.
-fn surface_shape(nodes: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Option<SharedShape> {
+pub(crate) fn surface_shape(nodes: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Option<SharedShape> {
     let v: Vec<_> = nodes.iter().map(vec_to_rapier).collect();
     SharedShape::trimesh_with_flags(v, triangles.to_vec(), TriMeshFlags::FIX_INTERNAL_EDGES).ok()
 }
@@ -92,7 +92,9 @@ pub(crate) fn add_surface_colliders(world: &mut World) {
             continue;
         };
         let mass: f64 = masses.iter().sum();
-        if !rigid.any_resolves_with_surface(mass) {
+        let pressed =
+            solver.compression_modulus().is_some() && !rigid.scene_bodies_from(mass).is_empty();
+        if !rigid.any_resolves_with_surface(mass) && !pressed {
             continue;
         }
         let Some(shape) = surface_shape(solver.node_positions(), &surface.triangles) else {
@@ -128,8 +130,36 @@ pub(crate) fn add_surface_colliders(world: &mut World) {
     world.insert_resource(RigidSurfaces(surfaces));
 }
 
+/// Whether a rigid body whose collider carries `tag` resolves its contact with a deformable of
+/// total mass `surface_mass` itself: a dynamic scene body lighter than the deformable. Then the
+/// rigid solver treats the deformable's surface as a collider and the deformable is handed the
+/// reaction; otherwise the deformable resolves the contact (the coupling scheme of
+/// [`crate::contact`]: the lighter side resolves).
+pub(crate) fn rigid_resolves(body: &RigidBody, tag: u128, surface_mass: f64) -> bool {
+    tag == SCENE_BODY_TAG && body.is_dynamic() && f64::from(body.mass()) < surface_mass
+}
+
+/// Whether dynamic scene body `handle` (its collider's tag `tag`) resolves its contact with the
+/// deformable of scene object `object` (total mass `surface_mass`) itself: as
+/// [`crate::contact::support`] chose for this physics step where the deformable lies on a
+/// support under the body (`sides`: `(object, body, the body resolves)`), else by mass
+/// ([`rigid_resolves`]).
+pub(crate) fn body_resolves(
+    sides: &[(u32, RigidBodyHandle, bool)],
+    body: &RigidBody,
+    handle: RigidBodyHandle,
+    tag: u128,
+    object: u32,
+    surface_mass: f64,
+) -> bool {
+    match sides.iter().find(|s| s.0 == object && s.1 == handle) {
+        Some(s) => s.2 && tag == SCENE_BODY_TAG && body.is_dynamic(),
+        None => rigid_resolves(body, tag, surface_mass),
+    }
+}
+
 /// The solver and contact surface of a deformable entity.
-fn solver_and_surface(
+pub(crate) fn solver_and_surface(
     world: &World,
     entity: Entity,
 ) -> Option<(
@@ -159,6 +189,10 @@ pub(crate) fn sync_surface_colliders(world: &mut World) {
     };
     let mut shapes = Vec::with_capacity(surfaces.0.len());
     for s in &surfaces.0 {
+        // a surface no body touches in this substep keeps its old shape
+        if !rigid.any_resolves_with_surface(s.mass) && !rigid.is_supported(s.object) {
+            continue;
+        }
         let Some((solver, surface)) = solver_and_surface(world, s.entity) else {
             continue;
         };
@@ -280,16 +314,16 @@ fn impulses_on(
 pub struct WithoutRigidSide<'a> {
     inner: RigidPart<'a>,
     rigid: &'a RigidContext,
-    mass: f64,
+    surface: &'a RigidSurface,
 }
 
 impl<'a> WithoutRigidSide<'a> {
-    /// The rigid world's query for a deformable of total mass `mass` kg.
-    pub fn new(rigid: &'a RigidContext, mass: f64) -> Self {
+    /// The rigid world's query for the deformable of `surface`.
+    pub fn new(rigid: &'a RigidContext, surface: &'a RigidSurface) -> Self {
         Self {
             inner: RigidPart::Borrowed(rigid),
             rigid,
-            mass,
+            surface,
         }
     }
 }
@@ -300,7 +334,11 @@ impl ContactQuery for WithoutRigidSide<'_> {
         self.inner.get().contacts_near(p, max_distance, out);
         let mut kept = from;
         for k in from..out.len() {
-            if !self.rigid.resolves_with_surface(out[k].body, self.mass) {
+            let s = self.surface;
+            if !self
+                .rigid
+                .resolves_with_surface(out[k].body, s.object, s.mass)
+            {
                 out[kept] = out[k];
                 kept += 1;
             }
@@ -316,7 +354,7 @@ impl ContactQuery for WithoutRigidSide<'_> {
         Some(Box::new(WithoutRigidSide {
             inner,
             rigid: self.rigid,
-            mass: self.mass,
+            surface: self.surface,
         }))
     }
 }

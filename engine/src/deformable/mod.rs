@@ -235,7 +235,7 @@ fn deformable_step<S: DeformableSolver>(
     names: Query<&Object>,
 ) {
     // Substep index within the physics step; deformables step at the first of every stride.
-    let index = clock.substeps % u64::from(settings.substeps.max(1));
+    let index = clock.substeps % u64::from(settings.step_substeps());
     let stride = u64::from(settings.deformable_stride.max(1));
     if !index.is_multiple_of(stride) {
         return;
@@ -297,7 +297,7 @@ fn deformable_step<S: DeformableSolver>(
                 Some(r) => match rigid_surfaces.as_deref().and_then(|s| s.of(entity)) {
                     // bodies lighter than this one resolve their contact with it themselves
                     Some(s) => {
-                        without = WithoutRigidSide::new(r, s.mass);
+                        without = WithoutRigidSide::new(r, s);
                         &without
                     }
                     None => r,

@@ -132,6 +132,13 @@ pub trait DeformableSolver: Send + Sync + 'static {
         let _ = (body, pose, nodes, grasp_force_limit);
         Err("this solver cannot hold nodes with a rigid body".to_string())
     }
+    /// The modulus, Pa, with which the body's material resists being compressed (a solid's
+    /// Young's modulus): what decides whether a rigid body heavier than the deformable, pressing
+    /// it onto a support, resolves the contact itself ([`crate::contact::support`]). Default:
+    /// none (such a body never does).
+    fn compression_modulus(&self) -> Option<f64> {
+        None
+    }
     /// Node masses, kg, one per node. Contact with other deformables ([`crate::contact`]) uses
     /// them to pick which body of a touching pair resolves the contact, and only a body with
     /// masses is pushed back by the other ([`DeformableSolver::add_node_impulses`]). Default:

@@ -290,6 +290,7 @@ fn compile_inner(
             .deformable_substeps
             .map_or(1, |d| (d / desc.physics.substeps).max(1)),
         max_body_speed: desc.physics.max_body_speed,
+        coupling_substeps: 1,
     };
     if let Some(0) = desc.episode_steps {
         return Err(SceneError::semantic(

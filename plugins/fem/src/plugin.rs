@@ -143,6 +143,9 @@ impl DeformableSolver for FemSolid {
     fn node_masses(&self) -> Option<&[f64]> {
         Some(self.masses())
     }
+    fn compression_modulus(&self) -> Option<f64> {
+        Some(self.youngs_modulus())
+    }
     fn add_node_impulses(&mut self, impulses: &[Vector3<f64>]) -> Result<(), String> {
         self.add_impulses(impulses).map_err(|e| e.to_string())
     }
