@@ -143,6 +143,10 @@ pub fn stiffness_ratios(world: &World) -> Vec<PressedPair> {
         let Some(modulus) = solver.compression_modulus() else {
             continue;
         };
+        // rebuilt after the last deformable step only while some pair used it
+        let current = (rigid.any_resolves_with_surface(s.mass) || rigid.is_supported(s.object))
+            .then(|| rigid.colliders.get(s.collider).map(|c| c.shared_shape()))
+            .flatten();
         let mut layer = None;
         for (h, mass) in bodies {
             let under = Under {
@@ -150,6 +154,7 @@ pub fn stiffness_ratios(world: &World) -> Vec<PressedPair> {
                 nodes: solver.node_positions(),
                 surface,
                 travel_time: step,
+                current,
             };
             out.push(PressedPair {
                 object: s.object,
@@ -169,7 +174,14 @@ struct Layer {
 }
 
 impl Layer {
-    fn new(nodes: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Option<Self> {
+    /// The layer of `triangles` over `nodes`; its ray mesh is `current` (the surface collider's
+    /// shape, when the rigid side kept it within `SURFACE_REBUILD_DISTANCE` of the nodes) or
+    /// built afresh.
+    fn new(
+        nodes: &[Vector3<f64>],
+        triangles: &[[u32; 3]],
+        current: Option<&SharedShape>,
+    ) -> Option<Self> {
         let mut areas = vec![0.0; nodes.len()];
         for t in triangles {
             let [a, b, c] = t.map(|i| nodes[i as usize]);
@@ -179,7 +191,10 @@ impl Layer {
             }
         }
         Some(Self {
-            mesh: surface_shape(nodes, triangles)?,
+            mesh: match current {
+                Some(shape) => shape.clone(),
+                None => surface_shape(nodes, triangles)?,
+            },
             areas,
         })
     }
@@ -192,6 +207,9 @@ struct Under<'a> {
     surface: &'a ContactSurface,
     /// How long the body travels before the next look (s): a physics step.
     travel_time: f64,
+    /// The surface collider's shape, if the rigid side rebuilt it after the last deformable step
+    /// (it had a pair then): the nodes are within `SURFACE_REBUILD_DISTANCE` of it.
+    current: Option<&'a SharedShape>,
 }
 
 impl Under<'_> {
@@ -216,7 +234,7 @@ impl Under<'_> {
                     continue;
                 }
                 if layer.is_none() {
-                    *layer = Layer::new(self.nodes, &self.surface.triangles);
+                    *layer = Layer::new(self.nodes, &self.surface.triangles, self.current);
                 }
                 let Some(l) = layer.as_ref() else {
                     return 0.0;
