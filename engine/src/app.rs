@@ -164,14 +164,11 @@ fn run_physics_steps(world: &mut World) {
     }
 }
 
-/// Runs [`Substep`] `substeps` times, each split into the coupling substeps the engine chooses
-/// for this physics step ([`crate::contact::support::plan_physics_step`]); the engine's system
-/// in [`PhysicsSystems::StepSimulation`].
+/// Runs [`Substep`] `substeps` times, each split into [`SimSettings::coupling_substeps`] (set in
+/// [`PhysicsSystems::ApplyActions`] by the contact module); the engine's system in
+/// [`PhysicsSystems::StepSimulation`].
 fn run_substeps(world: &mut World) {
-    let coupling = crate::contact::support::plan_physics_step(world);
-    let mut settings = world.resource_mut::<SimSettings>();
-    settings.coupling_substeps = coupling;
-    let n = settings.step_substeps();
+    let n = world.resource::<SimSettings>().step_substeps();
     for _ in 0..n {
         world.run_schedule(Substep);
         world.resource_mut::<SimClock>().substeps += 1;

@@ -48,6 +48,7 @@ pub mod rng;
 pub mod scene;
 pub mod settings;
 pub mod shapes;
+pub mod side;
 pub mod signals;
 pub mod simd;
 pub mod state;

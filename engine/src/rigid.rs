@@ -20,12 +20,12 @@ use rapier3d::prelude::*;
 use crate::app::{PhysicsSystems, Plugin, SimErrors, SubstepSystems};
 use crate::codec::{Decoder, Encoder, Persist, StateError};
 use crate::components::{Object, Pose, Velocity};
-use crate::contact::rigid_side::{body_resolves, rigid_resolves};
 use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::math::{
     interpolate_pose, pose_from_rapier, pose_to_rapier, vec_from_rapier, vec_to_rapier,
 };
 use crate::scene::{MaterialDesc, RigidKind, RigidModel, RigidShape};
+use crate::side::{body_resolves, rigid_resolves};
 use crate::state::{mismatch, StateHasher, Stateful};
 use crate::SimApp;
 
@@ -79,10 +79,8 @@ impl Plugin for RigidPlugin {
     }
 }
 
-/// `user_data` of the colliders of dynamic scene bodies (robots' links carry none): the bodies
-/// that resolve their contact with a heavier deformable themselves
-/// ([`RigidContext::resolves_with_surface`], [`crate::contact::rigid_side`]).
-pub const SCENE_BODY_TAG: u128 = 0x5343_454e << 96;
+/// `user_data` of the colliders of dynamic scene bodies ([`crate::side`]).
+pub use crate::side::SCENE_BODY_TAG;
 /// `user_data` tag (bits 96..128) of a deformable surface's collider; bits 0..32 hold its scene
 /// object's index and bits 32..96 the body's total mass (f64 bits): [`surface_user_data`].
 pub const SURFACE_TAG: u128 = 0x5355_5246 << 96;
@@ -104,7 +102,7 @@ pub fn surface_of(user_data: u128) -> Option<(u32, f64)> {
 
 /// rapier's pair filter for deformable surfaces' colliders (they carry
 /// `ActiveHooks::FILTER_CONTACT_PAIRS`; other pairs are never asked): a surface touches the
-/// bodies that resolve their contact with it (`rigid_side::body_resolves`) and nothing else.
+/// bodies that resolve their contact with it (`side::body_resolves`) and nothing else.
 struct SurfaceFilter<'a>(&'a [(u32, RigidBodyHandle, bool)]);
 
 impl PhysicsHooks for SurfaceFilter<'_> {

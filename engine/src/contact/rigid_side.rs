@@ -34,7 +34,7 @@ use crate::components::Object;
 use crate::coupling::{ContactQuery, PointContact};
 use crate::deformable::solver::deformable_ref;
 use crate::math::{vec_from_rapier, vec_to_rapier};
-use crate::rigid::{surface_user_data, RigidContext, SCENE_BODY_TAG};
+use crate::rigid::{surface_user_data, RigidContext};
 
 /// The deformable surfaces that have a collider in the rigid world (a resource inserted at
 /// spawn when there is one; it never changes, so it is not part of the env state: a state file
@@ -128,34 +128,6 @@ pub(crate) fn add_surface_colliders(world: &mut World) {
         });
     }
     world.insert_resource(RigidSurfaces(surfaces));
-}
-
-/// Whether a rigid body whose collider carries `tag` resolves its contact with a deformable of
-/// total mass `surface_mass` itself: a dynamic scene body lighter than the deformable. Then the
-/// rigid solver treats the deformable's surface as a collider and the deformable is handed the
-/// reaction; otherwise the deformable resolves the contact (the coupling scheme of
-/// [`crate::contact`]: the lighter side resolves).
-pub(crate) fn rigid_resolves(body: &RigidBody, tag: u128, surface_mass: f64) -> bool {
-    tag == SCENE_BODY_TAG && body.is_dynamic() && f64::from(body.mass()) < surface_mass
-}
-
-/// Whether dynamic scene body `handle` (its collider's tag `tag`) resolves its contact with the
-/// deformable of scene object `object` (total mass `surface_mass`) itself: as
-/// [`crate::contact::support`] chose for this physics step where the deformable lies on a
-/// support under the body (`sides`: `(object, body, the body resolves)`), else by mass
-/// ([`rigid_resolves`]).
-pub(crate) fn body_resolves(
-    sides: &[(u32, RigidBodyHandle, bool)],
-    body: &RigidBody,
-    handle: RigidBodyHandle,
-    tag: u128,
-    object: u32,
-    surface_mass: f64,
-) -> bool {
-    match sides.iter().find(|s| s.0 == object && s.1 == handle) {
-        Some(s) => s.2 && tag == SCENE_BODY_TAG && body.is_dynamic(),
-        None => rigid_resolves(body, tag, surface_mass),
-    }
 }
 
 /// The solver and contact surface of a deformable entity.

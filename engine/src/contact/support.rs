@@ -98,6 +98,24 @@ pub fn plan_physics_step(world: &mut World) -> u32 {
     coupling_substeps(worst)
 }
 
+/// Before the substeps of every physics step: the sides and coupling substeps of the pairs on a
+/// support ([`plan_physics_step`]).
+fn plan_coupling(world: &mut World) {
+    let coupling = plan_physics_step(world);
+    world.resource_mut::<crate::SimSettings>().coupling_substeps = coupling;
+}
+
+/// Adds the coupling plan to [`crate::app::PhysicsSystems::ApplyActions`] (before the substeps);
+/// it runs only in worlds with [`RigidSurfaces`].
+pub(crate) fn add_coupling_plan(app: &mut crate::SimApp) {
+    app.add_systems(
+        crate::PhysicsStep,
+        plan_coupling
+            .run_if(resource_exists::<RigidSurfaces>)
+            .in_set(crate::app::PhysicsSystems::ApplyActions),
+    );
+}
+
 /// The coupling substeps for a deformable-resolved pair of ratio `ratio` ([`STABLE_RATIO`]).
 pub fn coupling_substeps(ratio: f64) -> u32 {
     if ratio <= STABLE_RATIO {

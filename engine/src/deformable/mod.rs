@@ -420,6 +420,7 @@ where
         None => {
             crate::contact::add_contact_systems(app);
             crate::contact::rigid_side::add_rigid_side_systems(app);
+            crate::contact::support::add_coupling_plan(app);
             app.configure_sets(crate::Substep, solve);
             app.configure_sets(crate::PhysicsStep, writeback);
         }
