@@ -105,14 +105,16 @@ fn plan_coupling(world: &mut World) {
     world.resource_mut::<crate::SimSettings>().coupling_substeps = coupling;
 }
 
-/// Adds the coupling plan to [`crate::app::PhysicsSystems::ApplyActions`] (before the substeps);
-/// it runs only in worlds with [`RigidSurfaces`].
+/// Adds the coupling plan between [`crate::app::PhysicsSystems::ApplyActions`] and the substeps
+/// (`StepSimulation`); it runs only in worlds with [`RigidSurfaces`].
 pub(crate) fn add_coupling_plan(app: &mut crate::SimApp) {
+    use crate::app::PhysicsSystems;
     app.add_systems(
         crate::PhysicsStep,
         plan_coupling
             .run_if(resource_exists::<RigidSurfaces>)
-            .in_set(crate::app::PhysicsSystems::ApplyActions),
+            .after(PhysicsSystems::ApplyActions)
+            .before(PhysicsSystems::StepSimulation),
     );
 }
 
