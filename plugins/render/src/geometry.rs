@@ -426,6 +426,10 @@ impl SceneExtractor {
         handle: ColliderHandle,
     ) -> Option<ColliderVisual> {
         let co = rigid.colliders.get(handle)?;
+        // a deformable's surface collider (for the rigid solver) is drawn as the deformable
+        if modesuite_engine::rigid::surface_of(co.user_data).is_some() {
+            return None;
+        }
         let entity = co
             .parent()
             .and_then(|b| rigid.body_id(b))
