@@ -152,6 +152,7 @@ pub fn stiffness_ratios(world: &World) -> Vec<PressedPair> {
     };
     let (dt, step) = (settings.scene_substep_dt(), settings.dt);
     let mut out = Vec::new();
+    let mut fixed = None;
     for s in &surfaces.0 {
         let bodies = rigid.scene_bodies_from(0.0);
         if bodies.is_empty() {
@@ -168,6 +169,7 @@ pub fn stiffness_ratios(world: &World) -> Vec<PressedPair> {
             .then(|| rigid.colliders.get(s.collider).map(|c| c.shared_shape()))
             .flatten();
         let mut layer = None;
+        let fixed = fixed.get_or_insert_with(|| fixed_colliders(rigid));
         for (h, mass) in bodies {
             let under = Under {
                 rigid,
@@ -175,6 +177,7 @@ pub fn stiffness_ratios(world: &World) -> Vec<PressedPair> {
                 surface,
                 travel_time: step,
                 current,
+                fixed,
             };
             out.push(PressedPair {
                 object: s.object,
@@ -184,6 +187,23 @@ pub fn stiffness_ratios(world: &World) -> Vec<PressedPair> {
         }
     }
     out
+}
+
+/// The fixed rigid colliders (on fixed bodies or none; not deformables' surface colliders): what
+/// can hold a layer up. Gathered at most once per physics step, for the first deformable with
+/// bodies to weigh.
+fn fixed_colliders(rigid: &RigidContext) -> Vec<&Collider> {
+    rigid
+        .colliders
+        .iter()
+        .map(|(_, co)| co)
+        .filter(|co| {
+            co.parent()
+                .and_then(|b| rigid.bodies.get(b))
+                .is_none_or(|b| b.is_fixed())
+                && surface_of(co.user_data).is_none()
+        })
+        .collect()
 }
 
 /// A deformable's surface for rays and each node's share of its area (0 for inner nodes), built
@@ -227,6 +247,8 @@ struct Under<'a> {
     surface: &'a ContactSurface,
     /// How long the body travels before the next look (s): a physics step.
     travel_time: f64,
+    /// The fixed rigid colliders that can support a layer ([`fixed_colliders`]).
+    fixed: &'a [&'a Collider],
     /// The surface collider's shape, if the rigid side rebuilt it after the last deformable step
     /// (it had a pair then): the nodes are within `SURFACE_REBUILD_DISTANCE` of it.
     current: Option<&'a SharedShape>,
@@ -298,15 +320,10 @@ impl Under<'_> {
         let h = RAY_START + f64::from(toi);
         let end = vec_to_rapier(&(p + inward * h));
         let gap = (self.surface.thickness + SUPPORT_GAP) as f32;
-        let on_fixed = self.rigid.colliders.iter().any(|(_, co)| {
-            let fixed = co
-                .parent()
-                .and_then(|b| self.rigid.bodies.get(b))
-                .is_none_or(|b| b.is_fixed());
-            fixed
-                && surface_of(co.user_data).is_none()
-                && co.shape().distance_to_point(co.position(), end, true) <= gap
-        });
+        let on_fixed = self
+            .fixed
+            .iter()
+            .any(|co| co.shape().distance_to_point(co.position(), end, true) <= gap);
         on_fixed.then_some(h)
     }
 }
