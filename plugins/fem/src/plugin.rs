@@ -53,6 +53,10 @@ pub struct SolidParams {
     /// Nodes clamped to the world.
     #[serde(default)]
     pub fixed: Vec<NodeSelect>,
+    /// Contacts as penalty energies of this stiffness, in units of a node's `m / dt^2`
+    /// ([`FemConfig::penalty_contacts`]); default: exact contacts by active-set rounds.
+    #[serde(default)]
+    pub penalty_contacts: Option<f64>,
 }
 
 /// A compiled solid (shared by all envs).
@@ -283,11 +287,12 @@ impl BodyKind for SolidKind {
         let config = FemConfig {
             rayleigh_mass: params.rayleigh_mass.unwrap_or(0.0),
             rayleigh_stiffness: params.rayleigh_stiffness.unwrap_or(0.0),
+            penalty_contacts: params.penalty_contacts.unwrap_or(0.0),
             ..FemConfig::default()
         };
-        config
-            .validate()
-            .map_err(|e| SceneError::semantic(path.clone(), "(damping)", e.to_string()))?;
+        config.validate().map_err(|e| {
+            SceneError::semantic(path.clone(), "(damping, penalty_contacts)", e.to_string())
+        })?;
         let model = Arc::new(
             SolidModel::new(&nodes, &mesh.tets, material)
                 .map_err(|e| SceneError::semantic(path.clone(), "(mesh)", e.to_string()))?,

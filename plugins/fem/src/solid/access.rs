@@ -62,6 +62,7 @@ impl FemSolid {
             cg: [Vec::new(), Vec::new(), Vec::new()],
             active: Vec::new(),
             candidates: Vec::new(),
+            penalties: Vec::new(),
             normals: Vec::new(),
             con_forces: Vec::new(),
             contact_memory: Vec::new(),

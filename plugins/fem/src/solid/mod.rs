@@ -73,6 +73,7 @@ mod chord;
 mod config;
 mod factor;
 mod newton;
+mod penalty;
 mod state;
 mod step;
 #[cfg(test)]
@@ -154,6 +155,81 @@ struct Candidate {
     /// The previous active-set round's (friction magnitude used, `mu * normal force` it gave),
     /// for the secant update of a sliding contact's friction.
     secant: Option<(f64, f64)>,
+}
+
+/// A contact of [`FemConfig::penalty_contacts`]: the node's energy in the incremental potential
+/// is `k/2 min(0, gap)^2` for `gap = (x - point) . normal`, plus the smoothed Coulomb friction
+/// potential `mu_lambda f0(|u_t|)` of its tangential displacement relative to the collider over
+/// the step, `u_t = T (x - x_prev - v_c dt)`, with the normal force `lambda` lagged (fixed for
+/// the solve, from the last step's contact or the predicted penetration) and
+/// `f0(y) = y^2/eps - y^3/(3 eps^2) + eps/3` below `eps` (sticking region), `y` above
+/// (Li et al. 2020, "Incremental Potential Contact", sec. 5).
+#[derive(Clone, Copy, Debug)]
+struct PenaltyContact {
+    node: u32,
+    point: Vector3<f64>,
+    normal: Vector3<f64>,
+    /// Penalty stiffness, N/m.
+    stiffness: f64,
+    /// Friction coefficient times the lagged normal force, N.
+    mu_lambda: f64,
+    /// Where the collider's surface point that started under the node is at the step's end,
+    /// less the node's start position: `u_t` is the tangential part of `x - x_prev - shift`.
+    shift: Vector3<f64>,
+    /// Tangential displacement below which friction is in its sticking (smoothed) region, m.
+    eps: f64,
+}
+
+impl PenaltyContact {
+    fn gap(&self, x: &Vector3<f64>) -> f64 {
+        (x - self.point).dot(&self.normal)
+    }
+
+    /// Tangential displacement over the step relative to the collider.
+    fn slip(&self, x: &Vector3<f64>, xprev: &Vector3<f64>) -> Vector3<f64> {
+        let u = x - xprev - self.shift;
+        u - self.normal * u.dot(&self.normal)
+    }
+
+    /// Energy of the contact at `x`.
+    fn energy(&self, x: &Vector3<f64>, xprev: &Vector3<f64>) -> f64 {
+        let g = self.gap(x).min(0.0);
+        let y = self.slip(x, xprev).norm();
+        let f0 = if y < self.eps {
+            y * y / self.eps - y * y * y / (3.0 * self.eps * self.eps) + self.eps / 3.0
+        } else {
+            y
+        };
+        0.5 * self.stiffness * g * g + self.mu_lambda * f0
+    }
+
+    /// `f1(y) / y` of the friction potential (its gradient is `mu_lambda f1(y)/y u_t`).
+    fn friction_factor(&self, y: f64) -> f64 {
+        if y < self.eps {
+            2.0 / self.eps - y / (self.eps * self.eps)
+        } else {
+            1.0 / y
+        }
+    }
+
+    /// Gradient of the contact's energy at `x` (normal penalty and friction).
+    fn gradient(&self, x: &Vector3<f64>, xprev: &Vector3<f64>) -> Vector3<f64> {
+        let g = self.gap(x).min(0.0);
+        let u = self.slip(x, xprev);
+        self.normal * (self.stiffness * g) + u * (self.mu_lambda * self.friction_factor(u.norm()))
+    }
+
+    /// A positive semi-definite approximation of the energy's Hessian at `x`: the penalty's
+    /// `k n n^T` while penetrating, and the friction's `mu_lambda f1(y)/y (I - n n^T)`.
+    fn hessian(&self, x: &Vector3<f64>, xprev: &Vector3<f64>) -> Matrix3<f64> {
+        let nnt = self.normal * self.normal.transpose();
+        let mut h = (Matrix3::identity() - nnt)
+            * (self.mu_lambda * self.friction_factor(self.slip(x, xprev).norm()));
+        if self.gap(x) < 0.0 {
+            h += nnt * self.stiffness;
+        }
+        h
+    }
 }
 
 /// What an active contact ended a step with: the next step's contact on the same node and body
@@ -271,6 +347,9 @@ pub struct FemSolid {
     cg: [Vec<Vector3<f64>>; 3],
     active: Vec<ActiveCon>,
     candidates: Vec<Candidate>,
+    /// The step's contacts as penalty energies (only with `FemConfig::penalty_contacts`; empty
+    /// otherwise and outside a step's solve).
+    penalties: Vec<PenaltyContact>,
     /// Outward surface normals at the nodes at the start of the step.
     normals: Vec<Vector3<f64>>,
     con_forces: Vec<(u32, Vector3<f64>)>,

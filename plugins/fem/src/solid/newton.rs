@@ -49,6 +49,10 @@ impl FemSolid {
             }
             e -= (self.ext_force[i] + self.fric[i] + p.gravity * m).dot(&x[i]);
         }
+        for c in &self.penalties {
+            let i = c.node as usize;
+            e += c.energy(&x[i], &self.xprev[i]);
+        }
         e + self.grasp_energy_grad(x, None)
     }
 
@@ -96,6 +100,10 @@ impl FemSolid {
                 for &i in &g.nodes {
                     hess[pat.diag[i as usize] as usize] += Matrix3::identity() * g.params.stiffness;
                 }
+            }
+            for c in &self.penalties {
+                let i = c.node as usize;
+                hess[pat.diag[i] as usize] += c.hessian(&self.pos[i], &self.xprev[i]);
             }
             // grasp low-rank corrections (saturated grasps), per grasp: (H_h - K I) / n^2 on the mean
             let mut lowrank: Vec<(usize, Matrix3<f64>)> = Vec::new();
@@ -290,6 +298,10 @@ impl FemSolid {
                 g += (x[i] - self.xprev[i]) * (m * p.c_damp);
             }
             grad[i] = g;
+        }
+        for c in &self.penalties {
+            let i = c.node as usize;
+            grad[i] += c.gradient(&x[i], &self.xprev[i]);
         }
         self.grasp_energy_grad(x, Some(grad));
     }

@@ -9,6 +9,26 @@ use crate::coupling::{ContactQuery, PointContact, Reaction};
 use crate::error::FemError;
 use nalgebra::Vector3;
 
+/// How a step's solve treats its contacts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Contacts {
+    /// Constraints, with Coulomb friction by active-set rounds (sticking, sliding, released,
+    /// activated).
+    Rounds,
+    /// As `Rounds`, but every contact with friction sticks and none is released: the last
+    /// resort when the rounds fail even on the smallest part of a step (a body wedged between
+    /// a kinematic hand and walls, whose rounds do not settle and whose explicit sliding
+    /// forces can then fling nodes away). Sticking is a plain constraint with no force of its
+    /// own; for that short part of a step the body holds on to what it touches. Its result
+    /// passes the same speed check (on a PPO policy's Franka Bend episode it saved 4 of 6 such
+    /// parts; the episode still ended with a blow-up).
+    Stuck,
+    /// Penalty energies with lagged friction ([`FemConfig::penalty_contacts`]).
+    ///
+    /// [`FemConfig::penalty_contacts`]: crate::FemConfig::penalty_contacts
+    Penalty,
+}
+
 impl FemSolid {
     // ----------------------------------------------------------------- stepping
 
@@ -89,10 +109,17 @@ impl FemSolid {
         halvings: u32,
     ) -> Result<StepStats, FemError> {
         let strict = halvings > 0;
-        match self.step_once(dt, t0, gravity, contacts, reactions, strict, false) {
-            Err(FemError::Exploded { .. } | FemError::NotPositiveDefinite(_)) if !strict => {
+        let mode = if self.config.penalty_contacts > 0.0 {
+            Contacts::Penalty
+        } else {
+            Contacts::Rounds
+        };
+        match self.step_once(dt, t0, gravity, contacts, reactions, strict, mode) {
+            Err(FemError::Exploded { .. } | FemError::NotPositiveDefinite(_))
+                if !strict && mode == Contacts::Rounds =>
+            {
                 // the finest part failed too: once more with every touching contact stuck
-                self.step_once(dt, t0, gravity, contacts, reactions, false, true)
+                self.step_once(dt, t0, gravity, contacts, reactions, false, Contacts::Stuck)
             }
             Err(FemError::Exploded { .. } | FemError::NotPositiveDefinite(_)) if strict => {
                 // rolled back to the start of this (part of the) step: keep it in case a half fails
@@ -136,8 +163,7 @@ impl FemSolid {
     }
 
     /// One backward-Euler step; on failure (and, if `strict`, on a solve that did not converge)
-    /// the state is rolled back and an error returned. `stuck`: the last resort of a failing
-    /// step (see [`FemSolid::step_inner`]).
+    /// the state is rolled back and an error returned. `mode`: how its contacts are solved.
     #[allow(clippy::too_many_arguments)]
     fn step_once(
         &mut self,
@@ -147,7 +173,7 @@ impl FemSolid {
         contacts: &dyn ContactQuery,
         reactions: &mut Vec<Reaction>,
         strict: bool,
-        stuck: bool,
+        mode: Contacts,
     ) -> Result<StepStats, FemError> {
         let reactions_len = reactions.len();
         self.xprev.copy_from_slice(&self.pos);
@@ -159,7 +185,8 @@ impl FemSolid {
             .collect();
         let precond_backup = self.precond_at.clone();
         let memory_backup = self.contact_memory.clone();
-        let result = self.step_inner(dt, t0, gravity, contacts, reactions, stuck);
+        let result = self.step_inner(dt, t0, gravity, contacts, reactions, mode);
+        self.penalties.clear();
         let failed = match &result {
             Ok(stats) => {
                 let mut max_speed: f64 = 0.0;
@@ -201,13 +228,7 @@ impl FemSolid {
         result
     }
 
-    /// The step's solve. With `stuck`, every contact with friction sticks and no contact is
-    /// released: the last resort when the Coulomb rounds fail even on the smallest part of a
-    /// step (a body wedged between a kinematic hand and walls, whose rounds do not settle and
-    /// whose explicit sliding forces can then fling nodes away). Sticking is a plain
-    /// constraint with no force of its own; for that short part of a step the body holds on
-    /// to what it touches. Its result passes the same speed check (on a PPO policy's Franka
-    /// Bend episode it saved 4 of 6 such parts; the episode still ended with a blow-up).
+    /// The step's solve, its contacts solved as `mode` says.
     fn step_inner(
         &mut self,
         dt: f64,
@@ -215,8 +236,10 @@ impl FemSolid {
         gravity: Vector3<f64>,
         contacts: &dyn ContactQuery,
         reactions: &mut Vec<Reaction>,
-        stuck: bool,
+        mode: Contacts,
     ) -> Result<StepStats, FemError> {
+        let stuck = mode == Contacts::Stuck;
+        let penalty = mode == Contacts::Penalty;
         let n = self.n_nodes();
         let mut stats = StepStats::default();
         let problem = Problem {
@@ -314,7 +337,8 @@ impl FemSolid {
                     node: i,
                     contact: c,
                     // (a node that was touching and is predicted within the margin touches)
-                    active: gap < 0.0 || (memory.is_some() && gap < self.config.contact_margin),
+                    active: !penalty
+                        && (gap < 0.0 || (memory.is_some() && gap < self.config.contact_margin)),
                     stick: c.friction > 0.0 && !sliding,
                     stick_target,
                     normal_force,
@@ -331,12 +355,15 @@ impl FemSolid {
         // force or a change of kinetic friction smaller than what the solve resolves (its step
         // tolerance, and that step's inertial force) starts no new round.
         let pen_tol = self.config.newton_tolerance * self.model.length_scale;
+        if penalty {
+            self.build_penalties(dt, problem.c_mass);
+        }
         let max_rounds = 6;
         for round in 0..max_rounds + ACTIVATION_ROUNDS {
             // from the last round on, contacts are neither released nor change their friction
             let last = round + 1 >= max_rounds;
             // and after the activation rounds, nothing starts another round
-            let activate = round + 1 < max_rounds + ACTIVATION_ROUNDS;
+            let activate = round + 1 < max_rounds + ACTIVATION_ROUNDS && !penalty;
             for i in 0..n {
                 self.fric[i] = Vector3::zeros();
             }
@@ -441,6 +468,9 @@ impl FemSolid {
         }
         self.record_constraint_forces();
         self.contact_memory.clear();
+        if penalty {
+            self.remember_penalties();
+        }
         for c in &self.candidates {
             if c.active {
                 self.contact_memory.push(ContactMemory {
@@ -466,7 +496,10 @@ impl FemSolid {
         }
         // contact reactions (normal + friction); remaining penetration of inactive candidates
         // (only possible when the rounds ran out) is projected out
-        for c in &self.candidates {
+        if penalty {
+            stats.contacts = self.penalty_reactions(dt, reactions);
+        }
+        for c in self.candidates.iter().filter(|_| !penalty) {
             let i = c.node as usize;
             let nrm = c.contact.normal;
             if !c.active {
