@@ -12,7 +12,8 @@
 //! generators returning volumes); its linear tets become 10-node tets. `density` defaults to the
 //! object's material; `rayleigh_mass` and `rayleigh_stiffness` damp (see [`FemConfig`]); `fixed`
 //! clamps the selected nodes ([`NodeSelect`], object frame, all 10-node nodes) to the world.
-//! Contacts use the colliders' friction.
+//! Contacts use the colliders' friction; `penalty_contacts: s` makes them penalty energies
+//! (see [`FemConfig::penalty_contacts`]) instead of active-set constraints.
 //!
 //! The compiled [`SolidModel`] (quadrature data, sparsity, ordering) is built once per scene and
 //! shared by every env through `Arc`; each env's [`FemContext`] holds only the state, which is
