@@ -70,7 +70,8 @@ def test_experts_of_a_vector_env_match_single_envs() -> None:
 
 def test_the_shipped_drag_policy_drags_the_belt_round_the_post(root: Path) -> None:
     """Issue 29: the shipped PPO Franka Drag policy, from Python, on the first held-out seed:
-    success after exactly the 78 steps `modesuite eval` reports (deterministic)."""
+    success after exactly the 77 steps `modesuite eval` reports (deterministic; 78 before the
+    belt's penalty contacts of session 32)."""
     policy = modesuite.Policy(root / "policies/ppo/MoDe-Franka-Drag-v0")
     assert (policy.target, policy.algo) == ("MoDe-Franka-Drag-v0", "ppo")
     env = gym.make(f"modesuite/{policy.target}")
@@ -80,8 +81,8 @@ def test_the_shipped_drag_policy_drags_the_belt_round_the_post(root: Path) -> No
         obs, _, terminated, truncated, info = env.step(policy.act(obs.astype(np.float32)))
         if terminated or truncated:
             break
-    print(f"PPO Drag from Python: ended {info['ended']} after {steps} steps (want success, 78)")
-    assert (info["ended"], steps) == ("success", 78)
+    print(f"PPO Drag from Python: ended {info['ended']} after {steps} steps (want success, 77)")
+    assert (info["ended"], steps) == ("success", 77)
 
 
 def test_a_shipped_trained_policy_solves_its_task(root: Path) -> None:
