@@ -1,7 +1,8 @@
 //! The FEM example scenes: the clamped reference rod sags as beam theory says and stays stable
 //! for 60 s; the dropped torus comes to rest on the ground; the belt pushed up by a box is lifted,
 //! never penetrated, gives the box no energy and settles (60 s); and the regression case of a
-//! light box launched fast against a thin belt (it used to explode within 8 steps).
+//! light box launched fast against a thin belt (it used to explode within 8 steps); a bad
+//! `penalty_contacts` is refused with the object named.
 
 mod common;
 
@@ -261,4 +262,37 @@ fn deformable_substeps_above_substeps_split_each_rigid_substep() {
     println!("after 20 steps of free fall: split vs 4 substeps {d4:.2e} m (<= 1e-9), vs 1 substep {d1:.2e} m (> 1e-6)");
     assert!(d4 <= 1e-9);
     assert!(d1 > 1e-6);
+}
+
+#[test]
+fn a_negative_penalty_contact_stiffness_is_refused_with_the_object_named() {
+    let text = r#"Scene(
+    objects: [
+        (name: "ground", shape: Plane(size: (2.0, 2.0)), body: Static),
+        (name: "rod", shape: Box(size: (0.4, 0.04, 0.04), divisions: (4, 1, 1)), pose: (pos: (0.0, 0.0, 0.1)),
+         body: Kind(kind: "fem.solid", params: (youngs_modulus: 1e6, poisson_ratio: 0.3, penalty_contacts: Some(-1.0)))),
+    ],
+)"#;
+    let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
+    let err = modesuite::make::default_app()
+        .compile_scene(
+            &desc,
+            &modesuite::engine::scene::SceneSource::in_memory("."),
+        )
+        .err()
+        .expect("refused")
+        .to_string();
+    println!("{err}");
+    assert!(err.contains("\"rod\""), "{err}");
+    assert!(err.contains("config.penalty_contacts"), "{err}");
+    assert!(err.contains(">= 0"), "{err}");
+    // and a valid one compiles
+    let ok = text.replace("Some(-1.0)", "Some(100.0)");
+    let desc = modesuite::engine::scene::parse_str(&ok, "<test>").unwrap();
+    assert!(modesuite::make::default_app()
+        .compile_scene(
+            &desc,
+            &modesuite::engine::scene::SceneSource::in_memory(".")
+        )
+        .is_ok());
 }
