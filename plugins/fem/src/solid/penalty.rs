@@ -13,8 +13,8 @@ impl FemSolid {
     /// `penalty_contacts m c_mass`, friction from the candidate's normal force (the last step's
     /// on this node and body, or the one stopping its predicted penetration), the collider's
     /// surface displacement over the step as the reference of the slip.
+    /// (`step_once` empties the list after every solve.)
     pub(super) fn build_penalties(&mut self, dt: f64, c_mass: f64) {
-        self.penalties.clear();
         for c in &self.candidates {
             let m = self.model.mass[c.node as usize];
             self.penalties.push(PenaltyContact {
