@@ -63,6 +63,7 @@ impl FemSolid {
             active: Vec::new(),
             candidates: Vec::new(),
             penalties: Vec::new(),
+            penalty_factor: Vec::new(),
             normals: Vec::new(),
             con_forces: Vec::new(),
             contact_memory: Vec::new(),

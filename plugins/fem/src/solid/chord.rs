@@ -119,12 +119,14 @@ impl FemSolid {
             let x_ref = self.precond_at.as_ref().unwrap_or(&self.model.mesh.rest);
             self.warp
                 .update(&self.model.mesh.elements, x_ref, &self.pos);
-            // contact penalties sit in the factor along world normals: those nodes stay unturned
+            // contact penalties (and penalty contacts' Hessians where the factor holds them)
+            // sit in the factor along world directions: those nodes stay unturned
             self.warp.unwarp(
                 self.active
                     .iter()
                     .filter(|c| matches!(c.kind, ConKind::Contact))
-                    .map(|c| c.node),
+                    .map(|c| c.node)
+                    .chain(self.penalty_factor.iter().map(|c| c.0)),
             );
         } else {
             self.warp.reset();

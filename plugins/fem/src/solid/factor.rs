@@ -8,6 +8,17 @@ use crate::precond::{ContactFactor, Penalty, Solved};
 use crate::sparse::ProfileCholesky;
 use nalgebra::{Matrix3, Vector3};
 
+/// A contact in the factored matrix: node, direction (rounded, see [`quantised_normal`]), all
+/// three directions (a sticking contact), stiffness (`None`: an active-set contact's stiff
+/// penalty, `1e6` times the node's diagonal block).
+pub(super) type FactorContact = (u32, Vector3<f64>, bool, Option<f64>);
+
+/// A contact normal rounded to 1e-2 per component, so that a resting contact set reuses the
+/// factor.
+pub(super) fn quantised_normal(n: &Vector3<f64>) -> Vector3<f64> {
+    (n * 100.0).map(|x| x.round() / 100.0)
+}
+
 impl FemSolid {
     /// Factors `c_mass M + c_stiff K(x_ref) + grasp springs` with full constraints eliminated and
     /// partial ones penalised, if the cached factor does not match.
@@ -16,26 +27,30 @@ impl FemSolid {
         // active contacts enter the factor as stiff penalties along their normals, quantised to
         // 1e-2 so that a resting contact set reuses the factor; the factor is a pure function of
         // the key and the preconditioner shape (deterministic after snapshot restore)
-        let contacts: Vec<(u32, Vector3<f64>, bool)> = self
+        // (penalty contacts enter with their Hessian at the step's predicted positions)
+        let mut contacts: Vec<FactorContact> = self
             .active
             .iter()
             .filter(|c| matches!(c.kind, ConKind::Contact))
             .map(|c| {
                 (
                     c.node,
-                    (c.normal * 100.0).map(|x| x.round() / 100.0),
+                    quantised_normal(&c.normal),
                     c.proj[(0, 0)] == 1.0 && c.proj[(1, 1)] == 1.0,
+                    None,
                 )
             })
             .collect();
+        contacts.extend_from_slice(&self.penalty_factor);
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        for (node, n, stick) in &contacts {
+        for (node, n, stick, k) in &contacts {
             for w in [
                 *node as u64,
                 n.x.to_bits(),
                 n.y.to_bits(),
                 n.z.to_bits(),
                 *stick as u64,
+                k.map_or(u64::MAX, f64::to_bits),
             ] {
                 h = (h ^ w).wrapping_mul(0x0100_0000_01b3);
             }
@@ -95,8 +110,9 @@ impl FemSolid {
         Ok(k)
     }
 
-    /// Factors the system matrix `vals` with the contacts' stiff penalties (`1e6` times the norm
-    /// of the node's diagonal block, along the normal; all three directions when sticking),
+    /// Factors the system matrix `vals` with the contacts' stiff penalties (their own stiffness,
+    /// or `1e6` times the norm of the node's diagonal block, along the normal; all three
+    /// directions when sticking),
     /// reusing `base`, a factor of `vals` from an earlier contact set and the columns solved
     /// with it, when given;
     /// `contacts_changed`: `vals` was factored before with other contacts (see
@@ -106,15 +122,15 @@ impl FemSolid {
         base: Option<(ProfileCholesky, Solved)>,
         contacts_changed: bool,
         vals: &[Matrix3<f64>],
-        contacts: &[(u32, Vector3<f64>, bool)],
+        contacts: &[FactorContact],
     ) -> Result<(ContactFactor, usize), FemError> {
         let pat = &self.model.pattern;
         let penalties: Vec<Penalty> = contacts
             .iter()
-            .map(|&(node, n, stick)| {
+            .map(|&(node, n, stick, k)| {
                 let scale = vals[pat.diag[node as usize] as usize].norm().max(1e-300);
                 let n = n.try_normalize(1e-12).unwrap_or(Vector3::z());
-                (node, n, stick, 1e6 * scale)
+                (node, n, stick, k.unwrap_or(1e6 * scale))
             })
             .collect();
         ContactFactor::new(

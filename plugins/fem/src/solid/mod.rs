@@ -350,6 +350,9 @@ pub struct FemSolid {
     /// The step's contacts as penalty energies (only with `FemConfig::penalty_contacts`; empty
     /// otherwise and outside a step's solve).
     penalties: Vec<PenaltyContact>,
+    /// The penalty contacts' Hessian entries the factored matrix holds for this step (see
+    /// `penalty_blocks`; empty with them and outside a step's solve).
+    penalty_factor: Vec<factor::FactorContact>,
     /// Outward surface normals at the nodes at the start of the step.
     normals: Vec<Vector3<f64>>,
     con_forces: Vec<(u32, Vector3<f64>)>,

@@ -187,6 +187,7 @@ impl FemSolid {
         let memory_backup = self.contact_memory.clone();
         let result = self.step_inner(dt, t0, gravity, contacts, reactions, mode);
         self.penalties.clear();
+        self.penalty_factor.clear();
         let failed = match &result {
             Ok(stats) => {
                 let mut max_speed: f64 = 0.0;
@@ -357,6 +358,7 @@ impl FemSolid {
         let pen_tol = self.config.newton_tolerance * self.model.length_scale;
         if penalty {
             self.build_penalties(dt, problem.c_mass);
+            self.penalty_blocks(dt);
         }
         let max_rounds = 6;
         for round in 0..max_rounds + ACTIVATION_ROUNDS {
