@@ -87,6 +87,13 @@ fn spot_fem_task_continues_bit_exactly_from_a_state_file() {
 }
 
 #[test]
+fn fem_task_with_penalty_contacts_continues_bit_exactly_from_a_state_file() {
+    // the belt's penalty contacts: their lagged friction lives in the contact memory, and the
+    // factor holding their Hessians is rebuilt from the state after a load
+    round_trip("MoDe-Spot-Drag-v0");
+}
+
+#[test]
 fn rigid_contacts_continue_bit_exactly_from_a_state_file() {
     // boxes tumbling onto each other and the ground: contact manifolds and warm starts
     round_trip("scenes/examples/drop.scene.ron");

@@ -156,3 +156,49 @@ fn a_heavily_loaded_block_at_rest_keeps_its_factor_and_solves_directly() {
     assert!(linear <= 2 * newton);
     assert!(speed < 1e-3);
 }
+
+#[test]
+fn a_loaded_sliding_block_continues_bit_exactly_from_its_state() {
+    // the factor holding the contacts' Hessians is not state: it is rebuilt from the state
+    // (positions, velocities, contact memory) and must give the same steps
+    let mut s = block();
+    let floor = ground(0.5);
+    let top = s.rest_nodes_where(|p| (p.z - 0.04).abs() < 1e-12);
+    let mut forces = vec![Vector3::zeros(); s.n_nodes()];
+    for &i in &top {
+        forces[i as usize] = Vector3::new(0.0, 0.0, -0.5 * G / top.len() as f64);
+    }
+    s.set_external_forces(&forces).unwrap();
+    let mut reactions = Vec::new();
+    let g = Vector3::new(0.0, 0.0, -G);
+    for _ in 0..60 {
+        s.step(DT, g, &floor, &mut reactions).unwrap();
+    }
+    let pos = s.positions().to_vec();
+    let vel = vec![Vector3::new(0.5, 0.0, 0.0); pos.len()];
+    s.set_positions_velocities(&pos, &vel).unwrap();
+    for _ in 0..5 {
+        s.step(DT, g, &floor, &mut reactions).unwrap();
+    }
+    let saved = s.get_state();
+    let mut copy = block();
+    copy.set_external_forces(&forces).unwrap();
+    copy.set_state(&saved).unwrap();
+    let mut first_diff = None;
+    for k in 0..40 {
+        s.step(DT, g, &floor, &mut reactions).unwrap();
+        copy.step(DT, g, &floor, &mut reactions).unwrap();
+        let same = s.positions().iter().zip(copy.positions()).all(|(a, b)| {
+            a.iter()
+                .zip(b.iter())
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        });
+        if !same && first_diff.is_none() {
+            first_diff = Some(k);
+        }
+    }
+    println!(
+        "loaded sliding block from its state: first differing step {first_diff:?} (want None)"
+    );
+    assert_eq!(first_diff, None);
+}
