@@ -2,22 +2,11 @@
 //! grasp springs` with constraints eliminated or penalised and contacts as stiff penalties,
 //! cached by key.
 
-use super::{ConKind, FemSolid};
+use super::{quantised_normal, ConKind, FactorContact, FemSolid};
 use crate::error::FemError;
 use crate::precond::{ContactFactor, Penalty, Solved};
 use crate::sparse::ProfileCholesky;
 use nalgebra::{Matrix3, Vector3};
-
-/// A contact in the factored matrix: node, direction (rounded, see [`quantised_normal`]), all
-/// three directions (a sticking contact), stiffness (`None`: an active-set contact's stiff
-/// penalty, `1e6` times the node's diagonal block).
-pub(super) type FactorContact = (u32, Vector3<f64>, bool, Option<f64>);
-
-/// A contact normal rounded to 1e-2 per component, so that a resting contact set reuses the
-/// factor.
-pub(super) fn quantised_normal(n: &Vector3<f64>) -> Vector3<f64> {
-    (n * 100.0).map(|x| x.round() / 100.0)
-}
 
 impl FemSolid {
     /// Factors `c_mass M + c_stiff K(x_ref) + grasp springs` with full constraints eliminated and

@@ -257,6 +257,17 @@ struct Problem {
     gravity: Vector3<f64>,
 }
 
+/// A contact in the factored matrix: node, direction (rounded, see [`quantised_normal`]), all
+/// three directions (a sticking contact), stiffness (`None`: an active-set contact's stiff
+/// penalty, `1e6` times the node's diagonal block).
+pub(super) type FactorContact = (u32, Vector3<f64>, bool, Option<f64>);
+
+/// A contact normal rounded to 1e-2 per component, so that a resting contact set reuses the
+/// factor.
+pub(super) fn quantised_normal(n: &Vector3<f64>) -> Vector3<f64> {
+    (n * 100.0).map(|x| x.round() / 100.0)
+}
+
 /// Tangential speed (m/s) above which a contact starts a step sliding rather than sticking
 /// (raised, per contact, to the speed its kinetic friction would take away within the step).
 const SLIP_SPEED: f64 = 1e-3;
@@ -352,7 +363,7 @@ pub struct FemSolid {
     penalties: Vec<PenaltyContact>,
     /// The penalty contacts' Hessian entries the factored matrix holds for this step (see
     /// `penalty_blocks`; empty with them and outside a step's solve).
-    penalty_factor: Vec<factor::FactorContact>,
+    penalty_factor: Vec<FactorContact>,
     /// Outward surface normals at the nodes at the start of the step.
     normals: Vec<Vector3<f64>>,
     con_forces: Vec<(u32, Vector3<f64>)>,

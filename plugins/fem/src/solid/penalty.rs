@@ -4,8 +4,7 @@
 //!
 //! [`FemConfig::penalty_contacts`]: crate::FemConfig::penalty_contacts
 
-use super::factor::quantised_normal;
-use super::{ContactMemory, FemSolid, PenaltyContact, SLIP_SPEED};
+use super::{quantised_normal, ContactMemory, FemSolid, PenaltyContact, SLIP_SPEED};
 use crate::coupling::Reaction;
 use nalgebra::Vector3;
 
