@@ -116,20 +116,26 @@ fn a_block_sliding_on_the_ground_stops_where_coulomb_friction_says() {
     assert!((impulse.x / (total * v0) - 1.0).abs() < 0.05);
 }
 
-#[test]
-fn a_heavily_loaded_block_at_rest_keeps_its_factor_and_solves_directly() {
-    // 0.5 kg pressing on the top of the 0.064 kg block: the bottom nodes' contact and sticking
-    // friction stiffness is part of the factored matrix (chord matrix and preconditioner), so a
-    // resting step converges in a few chord iterations with the factor of the step before;
-    // without it a 20 kg box on a belt needed 100-250 conjugate-gradient iterations per solve
+/// The block with 0.5 kg pressing evenly on its top nodes, and those external forces.
+fn loaded_block() -> (FemSolid, Vec<Vector3<f64>>) {
     let mut s = block();
-    let floor = ground(0.5);
     let top = s.rest_nodes_where(|p| (p.z - 0.04).abs() < 1e-12);
     let mut forces = vec![Vector3::zeros(); s.n_nodes()];
     for &i in &top {
         forces[i as usize] = Vector3::new(0.0, 0.0, -0.5 * G / top.len() as f64);
     }
     s.set_external_forces(&forces).unwrap();
+    (s, forces)
+}
+
+#[test]
+fn a_heavily_loaded_block_at_rest_keeps_its_factor_and_solves_directly() {
+    // 0.5 kg pressing on the top of the 0.064 kg block: the bottom nodes' contact and sticking
+    // friction stiffness is part of the factored matrix (chord matrix and preconditioner), so a
+    // resting step converges in a few chord iterations with the factor of the step before;
+    // without it a 20 kg box on a belt needed 100-250 conjugate-gradient iterations per solve
+    let (mut s, _) = loaded_block();
+    let floor = ground(0.5);
     let mut reactions = Vec::new();
     for _ in 0..300 {
         s.step(DT, Vector3::new(0.0, 0.0, -G), &floor, &mut reactions)
@@ -161,14 +167,8 @@ fn a_heavily_loaded_block_at_rest_keeps_its_factor_and_solves_directly() {
 fn a_loaded_sliding_block_continues_bit_exactly_from_its_state() {
     // the factor holding the contacts' Hessians is not state: it is rebuilt from the state
     // (positions, velocities, contact memory) and must give the same steps
-    let mut s = block();
+    let (mut s, forces) = loaded_block();
     let floor = ground(0.5);
-    let top = s.rest_nodes_where(|p| (p.z - 0.04).abs() < 1e-12);
-    let mut forces = vec![Vector3::zeros(); s.n_nodes()];
-    for &i in &top {
-        forces[i as usize] = Vector3::new(0.0, 0.0, -0.5 * G / top.len() as f64);
-    }
-    s.set_external_forces(&forces).unwrap();
     let mut reactions = Vec::new();
     let g = Vector3::new(0.0, 0.0, -G);
     for _ in 0..60 {
