@@ -273,12 +273,7 @@ fn a_negative_penalty_contact_stiffness_is_refused_with_the_object_named() {
          body: Kind(kind: "fem.solid", params: (youngs_modulus: 1e6, poisson_ratio: 0.3, penalty_contacts: Some(-1.0)))),
     ],
 )"#;
-    let desc = modesuite::engine::scene::parse_str(text, "<test>").unwrap();
-    let err = modesuite::make::default_app()
-        .compile_scene(
-            &desc,
-            &modesuite::engine::scene::SceneSource::in_memory("."),
-        )
+    let err = modesuite::make::env_from_text(text)
         .err()
         .expect("refused")
         .to_string();
@@ -288,11 +283,5 @@ fn a_negative_penalty_contact_stiffness_is_refused_with_the_object_named() {
     assert!(err.contains(">= 0"), "{err}");
     // and a valid one compiles
     let ok = text.replace("Some(-1.0)", "Some(100.0)");
-    let desc = modesuite::engine::scene::parse_str(&ok, "<test>").unwrap();
-    assert!(modesuite::make::default_app()
-        .compile_scene(
-            &desc,
-            &modesuite::engine::scene::SceneSource::in_memory(".")
-        )
-        .is_ok());
+    assert!(modesuite::make::env_from_text(&ok).is_ok());
 }

@@ -219,14 +219,26 @@ impl PenaltyContact {
         self.normal * (self.stiffness * g) + u * (self.mu_lambda * self.friction_factor(u.norm()))
     }
 
-    /// A positive semi-definite approximation of the energy's Hessian at `x`: the penalty's
-    /// `k n n^T` while penetrating, and the friction's `mu_lambda f1(y)/y (I - n n^T)`.
+    /// The stiffnesses of the energy's Hessian at `x`: along the normal the penalty's `k` while
+    /// penetrating (else 0), in the tangent plane the friction's `mu_lambda f1(y)/y`.
+    fn stiffnesses(&self, x: &Vector3<f64>, xprev: &Vector3<f64>) -> (f64, f64) {
+        let normal = if self.gap(x) < 0.0 {
+            self.stiffness
+        } else {
+            0.0
+        };
+        let tangent = self.mu_lambda * self.friction_factor(self.slip(x, xprev).norm());
+        (normal, tangent)
+    }
+
+    /// A positive semi-definite approximation of the energy's Hessian at `x`:
+    /// `k_t (I - n n^T) + k_n n n^T` with the [`stiffnesses`](Self::stiffnesses).
     fn hessian(&self, x: &Vector3<f64>, xprev: &Vector3<f64>) -> Matrix3<f64> {
         let nnt = self.normal * self.normal.transpose();
-        let mut h = (Matrix3::identity() - nnt)
-            * (self.mu_lambda * self.friction_factor(self.slip(x, xprev).norm()));
-        if self.gap(x) < 0.0 {
-            h += nnt * self.stiffness;
+        let (kn, kt) = self.stiffnesses(x, xprev);
+        let mut h = (Matrix3::identity() - nnt) * kt;
+        if kn > 0.0 {
+            h += nnt * kn;
         }
         h
     }

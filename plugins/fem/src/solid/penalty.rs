@@ -41,8 +41,8 @@ impl FemSolid {
 
     /// The penalty contacts' Hessians for the factored matrix (the chord matrix and the
     /// preconditioner) of this step, into `penalty_factor`: per contact, `k_t I + (k_n - k_t)
-    /// n n^T` for normal stiffness `k_n` (while pressed) and friction stiffness `k_t` in the
-    /// tangent plane (`mu_lambda f1(y)/y`), both rounded ([`quantised_stiffness`]), as entries
+    /// n n^T` with the contact's Hessian stiffnesses (`PenaltyContact::stiffnesses`), both
+    /// rounded ([`quantised_stiffness`]), as entries
     /// with non-negative stiffness (the plane's two directions when `k_t > k_n`), at the
     /// step's predicted positions `x_n + dt v_n` (a function of the state: a steady contact
     /// set keeps its factor from step to step, and one evaluation per Newton iteration
@@ -50,7 +50,7 @@ impl FemSolid {
     /// them the factor lacked the contacts' stiffness (the sticking friction's is hundreds of
     /// times a node's inertia), the chord stalled and exact Newton's conjugate gradients
     /// needed 100-250 iterations per solve under a heavy box (a 20 kg box on a belt: 3.9 steps/s,
-    /// 61 with them). Left out when their columns would cost less as conjugate-gradient
+    /// 43 with them). Left out when their columns would cost less as conjugate-gradient
     /// iterations (about one per column, each a solve with the factor) than a factorisation.
     pub(super) fn penalty_blocks(&mut self, dt: f64) {
         let mut out = std::mem::take(&mut self.penalty_factor);
@@ -58,8 +58,7 @@ impl FemSolid {
         for p in &self.penalties {
             let i = p.node as usize;
             let x = self.xprev[i] + self.vprev[i] * dt;
-            let kn = if p.gap(&x) < 0.0 { p.stiffness } else { 0.0 };
-            let kt = p.mu_lambda * p.friction_factor(p.slip(&x, &self.xprev[i]).norm());
+            let (kn, kt) = p.stiffnesses(&x, &self.xprev[i]);
             let (kn, kt) = (quantised_stiffness(kn), quantised_stiffness(kt));
             if kn == 0.0 && kt == 0.0 {
                 continue;
