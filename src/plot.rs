@@ -1,6 +1,9 @@
 //! `modesuite plot`: training curves of one or more runs (seeds) as a PNG, in the style of the
 //! MoDeSuite paper's figures: the mean over runs as a line and one standard deviation as a
-//! band, episode return on the left and success rate on the right, against env steps.
+//! band, episode return on the left and success rate on the right, against env steps. Where a
+//! run folder has an `evals.jsonl` (the held-out evaluations `scripts/results.py` appends: one
+//! JSON object per line with `env_steps` and `success_rate`), the success panel also shows each
+//! evaluation as a dot and their mean over the runs as an orange line.
 //!
 //! Lines, bands and grid are drawn by `plotters` (bitmap backend); the text (title, tick
 //! values, axis names) by the renderer's built-in bitmap font, so no system font is needed.
@@ -36,6 +39,20 @@ pub fn curve(
         .map(|r| {
             r.iter()
                 .filter_map(|m| value(m).map(|v| (m.env_steps as f64, v)))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    series_curve(&series, points)
+}
+
+/// [`curve`] of series of `(env steps, value)` points in order (non-finite values and empty
+/// series are left out).
+pub fn series_curve(series: &[Vec<(f64, f64)>], points: usize) -> Option<Curve> {
+    let series: Vec<Vec<(f64, f64)>> = series
+        .iter()
+        .map(|s| {
+            s.iter()
+                .copied()
                 .filter(|(_, v)| v.is_finite())
                 .collect::<Vec<_>>()
         })
@@ -74,6 +91,39 @@ pub fn curve(
     Some(out)
 }
 
+/// One held-out evaluation of a run, as `scripts/results.py` appends it to the run's
+/// `evals.jsonl` (other keys are ignored).
+#[derive(Debug, Clone, serde::Deserialize)]
+struct Evaluation {
+    env_steps: u64,
+    success_rate: f64,
+}
+
+/// The held-out evaluations of each run folder as `(env steps, success in %)` in file order:
+/// empty for a folder without `evals.jsonl`; a line that is not an evaluation is an error naming
+/// the file and line.
+pub fn load_evaluations(dirs: &[PathBuf]) -> Result<Vec<Vec<(f64, f64)>>, String> {
+    dirs.iter()
+        .map(|d| {
+            let path = d.join("evals.jsonl");
+            let text = match std::fs::read_to_string(&path) {
+                Ok(t) => t,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+                Err(e) => return Err(format!("{}: {e}", path.display())),
+            };
+            text.lines()
+                .enumerate()
+                .filter(|(_, l)| !l.trim().is_empty())
+                .map(|(i, l)| {
+                    serde_json::from_str::<Evaluation>(l)
+                        .map(|e| (e.env_steps as f64, 100.0 * e.success_rate))
+                        .map_err(|e| format!("{}:{}: {e}", path.display(), i + 1))
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// Reads the `metrics.jsonl` of each run folder.
 pub fn load_runs(dirs: &[PathBuf]) -> Result<Vec<Vec<Metrics>>, String> {
     dirs.iter()
@@ -94,8 +144,13 @@ pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), MakeError> 
         ));
     }
     let runs = load_runs(dirs).map_err(MakeError::Input)?;
+    let evals = load_evaluations(dirs).map_err(MakeError::Input)?;
     let ret = curve(&runs, |m| m.return_mean, 200);
     let succ = curve(&runs, |m| m.success_rate.map(|s| 100.0 * s), 200);
+    let held_out = Held {
+        mean: series_curve(&evals, 200),
+        points: evals.concat(),
+    };
     if ret.is_none() && succ.is_none() {
         return Err(MakeError::Input(format!(
             "plot: no finished episodes in the metrics of {}",
@@ -106,17 +161,24 @@ pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), MakeError> 
         )));
     }
     let mut buf = vec![255u8; (W * H * 3) as usize];
-    let mut labels: Vec<(i32, i32, String)> = Vec::new();
+    let mut labels = Labels::new();
     {
         let root = BitMapBackend::with_buffer(&mut buf, (W, H)).into_drawing_area();
         let (left, right) = root.split_horizontally(W / 2);
+        let none = Held::default();
         let panels = [
-            (left, ret.as_ref(), "episode return", None),
-            (right, succ.as_ref(), "success rate (%)", Some((0.0, 100.0))),
+            (left, ret.as_ref(), "episode return", None, &none),
+            (
+                right,
+                succ.as_ref(),
+                "success rate (%)",
+                Some((0.0, 100.0)),
+                &held_out,
+            ),
         ];
-        for (area, c, name, fixed) in panels {
+        for (area, c, name, fixed, held) in panels {
             let Some(c) = c else { continue };
-            draw_panel(&area, c, fixed, name, &mut labels)
+            draw_panel(&area, c, fixed, name, held, &mut labels)
                 .map_err(|e| MakeError::Runtime(format!("plot: {e}")))?;
         }
         root.present()
@@ -127,29 +189,53 @@ pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), MakeError> 
         dirs.len(),
         if dirs.len() == 1 { "" } else { "s" }
     );
-    labels.push(((W as i32 - 6 * caption.len() as i32 * 2) / 2, 4, caption));
-    for (x, y, text) in labels {
+    labels.push((
+        (W as i32 - 6 * caption.len() as i32 * 2) / 2,
+        4,
+        caption,
+        INK,
+    ));
+    for (x, y, text, colour) in labels {
         let (x, y) = (x.max(0) as u32, y.max(0) as u32);
-        modesuite_render::hud::draw_text(&mut buf, W, H, 3, (x, y), 2, &[text], [20, 20, 20]);
+        modesuite_render::hud::draw_text(&mut buf, W, H, 3, (x, y), 2, &[text], colour);
     }
     modesuite_render::video::write_png(out, W, H, &buf)
         .map_err(|e| MakeError::Runtime(e.to_string()))
 }
 
-type Labels = Vec<(i32, i32, String)>;
+/// Text: position, text and colour.
+type Labels = Vec<(i32, i32, String, [u8; 3])>;
+
+const INK: [u8; 3] = [20, 20, 20];
+const ORANGE: [u8; 3] = [230, 110, 10];
+const BLUE: [u8; 3] = [31, 119, 180];
+
+/// The held-out evaluations drawn on a panel: every run's points and their mean over runs.
+#[derive(Default)]
+struct Held {
+    points: Vec<(f64, f64)>,
+    mean: Option<Curve>,
+}
 
 fn draw_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, plotters::coord::Shift>,
     c: &Curve,
     fixed: Option<(f64, f64)>,
     name: &str,
+    held: &Held,
     labels: &mut Labels,
 ) -> Result<(), Box<dyn std::error::Error + 'static>>
 where
     DB::ErrorType: 'static,
 {
     let x0 = c.x.first().copied().unwrap_or(0.0).min(0.0);
-    let x1 = c.x.last().copied().unwrap_or(1.0).max(x0 + 1.0);
+    let last_eval = held.points.iter().map(|p| p.0).fold(0.0, f64::max);
+    let x1 =
+        c.x.last()
+            .copied()
+            .unwrap_or(1.0)
+            .max(last_eval)
+            .max(x0 + 1.0);
     let (y0, y1) = fixed.unwrap_or_else(|| {
         let lo = c
             .mean
@@ -179,9 +265,9 @@ where
         chart.draw_series(LineSeries::new([(x, y0), (x, y1)], grid))?;
         chart.draw_series(LineSeries::new([(x0, y), (x1, y)], grid))?;
         let (px, py) = chart.backend_coord(&(x, y0));
-        labels.push((px - 20, py + 8, tick(x, x1 - x0)));
+        labels.push((px - 20, py + 8, tick(x, x1 - x0), INK));
         let (px, py) = chart.backend_coord(&(x0, y));
-        labels.push((px - 84, py - 8, tick(y, y1 - y0)));
+        labels.push((px - 84, py - 8, tick(y, y1 - y0), INK));
     }
     chart.draw_series(LineSeries::new(
         [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)],
@@ -198,17 +284,44 @@ where
                     .map(|(x, (m, s))| (*x, (m - s).max(y0))),
             )
             .collect();
-    let blue = RGBColor(31, 119, 180);
+    let blue = RGBColor(BLUE[0], BLUE[1], BLUE[2]);
     chart.draw_series(std::iter::once(Polygon::new(band, blue.mix(0.25).filled())))?;
     chart.draw_series(LineSeries::new(
         c.x.iter().copied().zip(c.mean.iter().copied()),
         blue.stroke_width(2),
     ))?;
-    let (px, _) = chart.backend_coord(&(x0, y1));
-    let (_, py) = chart.backend_coord(&(x0, y1));
-    labels.push((px, py - 26, name.to_string()));
+    let orange = RGBColor(ORANGE[0], ORANGE[1], ORANGE[2]);
+    if let Some(m) = &held.mean {
+        chart.draw_series(LineSeries::new(
+            m.x.iter().copied().zip(m.mean.iter().copied()),
+            orange.stroke_width(2),
+        ))?;
+    }
+    chart.draw_series(
+        held.points
+            .iter()
+            .map(|p| Circle::new(*p, 4, orange.filled())),
+    )?;
+    let (px, py) = chart.backend_coord(&(x0, y1));
+    labels.push((px, py - 26, name.to_string(), INK));
     let (px, py) = chart.backend_coord(&(x1, y0));
-    labels.push((px - 100, py + 26, "env steps".to_string()));
+    if !held.points.is_empty() {
+        // a legend inside the panel's lower right corner
+        // (the line's blue, lightened to read on the labels' dark ground)
+        labels.push((
+            px - 260,
+            py - 48,
+            "training episodes".to_string(),
+            [110, 180, 240],
+        ));
+        labels.push((
+            px - 260,
+            py - 26,
+            "held-out evaluations".to_string(),
+            [255, 150, 60],
+        ));
+    }
+    labels.push((px - 100, py + 26, "env steps".to_string(), INK));
     Ok(())
 }
 
@@ -245,6 +358,28 @@ mod tests {
         assert_eq!(tick(-1702.1, 8.0), "-1702.10");
         assert_eq!(tick(0.35, 1.0), "0.35");
         assert_eq!(tick(80.0, 100.0), "80");
+    }
+
+    #[test]
+    fn held_out_evaluations_are_read_per_run_and_located_when_wrong() {
+        let root = std::env::temp_dir().join(format!("ms-plot-evals-{}", std::process::id()));
+        let (a, b) = (root.join("a"), root.join("b"));
+        std::fs::create_dir_all(&a).unwrap();
+        std::fs::create_dir_all(&b).unwrap();
+        std::fs::write(
+            a.join("evals.jsonl"),
+            "{\"env_steps\": 100, \"success_rate\": 0.25, \"errors\": 0}\n\n{\"env_steps\": 200, \"success_rate\": 1.0}\n",
+        )
+        .unwrap();
+        let evals = load_evaluations(&[a.clone(), b.clone()]).unwrap();
+        assert_eq!(evals, vec![vec![(100.0, 25.0), (200.0, 100.0)], vec![]]);
+        std::fs::write(b.join("evals.jsonl"), "{\"env_steps\": 100}\n").unwrap();
+        let err = load_evaluations(&[a, b.clone()]).unwrap_err();
+        assert!(
+            err.starts_with(&format!("{}:1: ", b.join("evals.jsonl").display())),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]
