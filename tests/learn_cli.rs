@@ -150,6 +150,12 @@ fn train_resume_eval_and_plot_a_task() {
     assert!(lines(&long.join("metrics.jsonl"))
         .iter()
         .any(|m| m["return_mean"].is_number()));
+    // held-out evaluations as scripts/results.py appends them are drawn on the success panel
+    std::fs::write(
+        long.join("evals.jsonl"),
+        "{\"env_steps\": 640, \"success_rate\": 0.5, \"errors\": 0}\n",
+    )
+    .unwrap();
     let png = long.join("curves.png");
     stdout_ok(
         modesuite()
@@ -164,6 +170,32 @@ fn train_resume_eval_and_plot_a_task() {
     // width and height in the IHDR chunk
     assert_eq!(u32::from_be_bytes(bytes[16..20].try_into().unwrap()), 1200);
     assert_eq!(u32::from_be_bytes(bytes[20..24].try_into().unwrap()), 480);
+}
+
+#[test]
+fn checkpoints_continue_the_episodes_under_way() {
+    // a checkpoint every 16 env steps: before the envs' states went into the checkpoint, each
+    // one reset the envs and no training episode outlived it
+    let dir = tmp("continue");
+    train(
+        &dir,
+        "1",
+        "640",
+        &[
+            "--set",
+            "horizon=16",
+            "--set",
+            "hidden=[16]",
+            "--checkpoint-every",
+            "1",
+        ],
+    );
+    let longest = lines(&dir.join("metrics.jsonl"))
+        .iter()
+        .filter_map(|m| m["length_mean"].as_f64())
+        .fold(0.0, f64::max);
+    println!("longest training episode {longest} steps across checkpoints every 16 steps (> 16)");
+    assert!(longest > 16.0, "{longest}");
 }
 
 #[test]
