@@ -221,6 +221,10 @@ pub struct RunSummary {
     pub env_steps: u64,
     /// Whether the run resumed from a checkpoint.
     pub resumed: bool,
+    /// Why the environments saved in the checkpoint could not be restored on resume (a state
+    /// file of another build, say): they were reset instead, and the run goes on, no longer
+    /// bit-identical to an uninterrupted one.
+    pub envs_reset: Option<String>,
     /// Whether an observer stopped it before `total_env_steps`.
     pub stopped: bool,
     /// The last iteration's metrics, if any iteration ran in this call.
@@ -268,6 +272,7 @@ pub fn run(
         .map_err(|e| LearnError::Io(format!("{}: {e}", opts.dir.display())))?;
     let ckpt = checkpoint_path(&opts.dir);
     let mut resumed = false;
+    let mut envs_reset = None;
     if ckpt.exists() {
         if !opts.resume {
             return Err(LearnError::Config(format!(
@@ -285,10 +290,15 @@ pub fn run(
             )));
         }
         t.read_state(&c)?;
-        if c.has("env_state") {
+        let restored = if c.has("env_state") {
             env.load_state(c.bytes("env_state")?)
-                .map_err(LearnError::Env)?;
         } else {
+            Err("the checkpoint holds no environment state".into())
+        };
+        if let Err(why) = restored {
+            if c.has("env_state") {
+                envs_reset = Some(why);
+            }
             t.restart_episodes(env)?;
         }
         resumed = true;
@@ -323,6 +333,7 @@ pub fn run(
         iterations: t.iteration(),
         env_steps: t.env_steps(),
         resumed,
+        envs_reset,
         stopped,
         last,
         param_hash: t.param_hash(),

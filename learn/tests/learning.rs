@@ -175,6 +175,62 @@ impl<E: VecEnvironment> VecEnvironment for Stateless<E> {
     }
 }
 
+/// Saves its state but cannot restore one (a checkpoint of another build of the simulator).
+struct Unrestorable<E>(E);
+
+impl<E: VecEnvironment> VecEnvironment for Unrestorable<E> {
+    fn num_envs(&self) -> usize {
+        self.0.num_envs()
+    }
+    fn obs_dim(&self) -> usize {
+        self.0.obs_dim()
+    }
+    fn act_dim(&self) -> usize {
+        self.0.act_dim()
+    }
+    fn action_bounds(&self) -> (Vec<f32>, Vec<f32>) {
+        self.0.action_bounds()
+    }
+    fn identity(&self) -> String {
+        self.0.identity()
+    }
+    fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
+        self.0.reset(seed)
+    }
+    fn step(&mut self, actions: &[f32]) -> Result<modesuite_learn::BatchStep, String> {
+        self.0.step(actions)
+    }
+    fn save_state(&self) -> Option<Vec<u8>> {
+        self.0.save_state()
+    }
+    fn load_state(&mut self, _state: &[u8]) -> Result<(), String> {
+        Err("written by another build".into())
+    }
+}
+
+#[test]
+fn a_run_whose_saved_envs_cannot_be_restored_resumes_with_reset_envs() {
+    let cfg = AlgoConfig::Ppo(PpoConfig {
+        hidden: vec![16],
+        horizon: 16,
+        minibatch_size: 64,
+        ..PpoConfig::default()
+    });
+    let dir = tmp("unrestorable");
+    let opts = |total| RunOptions {
+        checkpoint_every: 2,
+        ..RunOptions::new(&dir, total)
+    };
+    let mut env = Unrestorable(PointReach::new(4));
+    let first = train(&cfg, &mut env, &opts(4 * 16 * 2), &mut Silent).unwrap();
+    assert_eq!(first.envs_reset, None);
+    let mut env = Unrestorable(PointReach::new(4));
+    let rest = train(&cfg, &mut env, &opts(4 * 16 * 4), &mut Silent).unwrap();
+    assert!(rest.resumed && rest.iterations == 4);
+    assert_eq!(rest.envs_reset.as_deref(), Some("written by another build"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 fn comparable(m: &[Metrics]) -> Vec<Metrics> {
     m.iter()
         .map(|m| Metrics {

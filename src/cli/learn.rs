@@ -172,6 +172,13 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
             .map_or("-".to_string(), |m| m.progress_line(total))
     )
     .map_err(io)?;
+    if let Some(why) = &summary.envs_reset {
+        writeln!(
+            out,
+            "note: the envs saved in the checkpoint could not be restored ({why}); they were reset on resume, so this run no longer matches an uninterrupted one bit for bit"
+        )
+        .map_err(io)?;
+    }
     let learner = outcome.wall_seconds - outcome.env_seconds;
     writeln!(
         out,
