@@ -23,16 +23,14 @@
 //! - `--plugin PATH` (repeatable) on `run`, `validate` and `list` loads a compiled plugin (C ABI,
 //!   see `modesuite_engine::dynamic`); nothing is ever loaded because a scene names it.
 
-use std::io::{IsTerminal, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::Instant;
 
 use clap::{Parser, Subcommand};
 use serde_json::json;
 
 use modesuite_engine::bench::{BenchOptions, BenchRecord};
-use modesuite_engine::checkpoint::StateError;
 use modesuite_engine::prelude::*;
 use modesuite_engine::scene::{self, SceneModel};
 use modesuite_engine::{DynamicPlugin, PluginLoadError};
@@ -43,13 +41,13 @@ mod fuzz;
 mod imitation;
 pub mod learn;
 mod record;
+mod run;
 mod soak;
 mod teleop;
 
-use crate::episode::{final_success, EpisodeEnd};
-use crate::make::{self, load_plugins, MakeError, MakeOptions};
+use crate::make::{self, load_plugins, MakeError};
 use modesuite_render::RenderConfig;
-use record::{parse_size, render_err, Recorder};
+use record::{parse_size, render_err};
 
 /// Command-line arguments.
 #[derive(Parser, Debug)]
@@ -191,6 +189,12 @@ pub struct RunArgs {
     /// `policy` observation (the task environments' robot camera is `robot`, 128 x 128).
     #[arg(long, value_name = "CAMERA")]
     pub rgbd: Option<String>,
+    /// Threads running episodes side by side, each in its own env (`0`: all cores). Every
+    /// episode resets with its own seed, so the episodes and their results are the same for
+    /// any number (wall times aside); with `--video`, `--frames`, `--dump-state`,
+    /// `--save-state` or `--load-state` the episodes run one after another.
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
 }
 
 /// Arguments of `view`.
@@ -287,7 +291,7 @@ pub fn run_cli(cli: Cli, out: &mut dyn Write) -> Result<(), CliError> {
         None => run_default(out),
         Some(Command::List { what, plugin }) => list(what.as_deref(), &load_plugins(&plugin)?, out),
         Some(Command::Validate { files, plugin }) => validate(&files, &load_plugins(&plugin)?, out),
-        Some(Command::Run(args)) => run(&args, out),
+        Some(Command::Run(args)) => run::run(&args, out),
         Some(Command::View(args)) => view(&args, out),
         Some(Command::Train(args)) => learn::train(&args, out),
         Some(Command::Eval(args)) => learn::eval(&args, out),
@@ -343,8 +347,9 @@ fn run_default(out: &mut dyn Write) -> Result<(), CliError> {
         policy: "scripted".into(),
         rgbd: None,
         actions: None,
+        threads: 1,
     };
-    run(&args, out)
+    run::run(&args, out)
 }
 
 fn list(
@@ -530,17 +535,6 @@ fn validate(
     Ok(())
 }
 
-fn run(args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let opts = MakeOptions {
-        actions: args.actions.clone(),
-        rgbd: args.rgbd.clone(),
-        plugins: load_plugins(&args.plugin)?,
-        episode_steps: None,
-    };
-    let made = make::make_envs(&args.target, &opts, 1)?;
-    run_scene(made, args, out)
-}
-
 fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let size = parse_size("--size", &args.size)?;
     let (mut desc, source) = make::load_target(&args.target)?;
@@ -596,223 +590,6 @@ fn view(args: &ViewArgs, out: &mut dyn Write) -> Result<(), CliError> {
             .map_or(String::new(), |p| format!(", recording {}", p.display()))
     )
     .map_err(io)
-}
-
-/// A one-line progress bar on stderr when it is a terminal.
-struct Progress {
-    total: u64,
-    enabled: bool,
-    last_pct: u64,
-}
-
-impl Progress {
-    fn new(total: u64) -> Self {
-        Self {
-            total,
-            enabled: total >= 2000 && std::io::stderr().is_terminal(),
-            last_pct: u64::MAX,
-        }
-    }
-    fn update(&mut self, done: u64) {
-        if !self.enabled {
-            return;
-        }
-        let pct = done * 100 / self.total.max(1);
-        if pct != self.last_pct {
-            self.last_pct = pct;
-            let filled = (pct / 4) as usize;
-            eprint!(
-                "\r[{}{}] {pct:3}% ({done}/{})",
-                "#".repeat(filled),
-                " ".repeat(25 - filled),
-                self.total
-            );
-        }
-    }
-    fn finish(&self) {
-        if self.enabled {
-            eprintln!();
-        }
-    }
-}
-
-fn run_scene(made: make::Made, args: &RunArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let make::Made { envs, model } = made;
-    let steps = args.steps.or(model.episode_steps).unwrap_or(600);
-    if steps == 0 {
-        return Err(CliError::input("--steps = 0: must be at least 1"));
-    }
-    if args.episodes == 0 {
-        return Err(CliError::input("--episodes = 0: must be at least 1"));
-    }
-    RenderConfig::from_scene(&model)?;
-    let mut recorder = Recorder::new(&model, args)?;
-    let Some(mut env) = envs.into_iter().next() else {
-        return Err(CliError::runtime("no env was made"));
-    };
-    // The CLI resets between episodes itself, so the final state stays for --dump-state.
-    env.autoreset = false;
-    let act_dim = env.spaces().action.flat_dim();
-    let mut action = vec![0.0f32; act_dim];
-    let mut policy = make_run_policy(&args.policy, &env)?;
-    if !args.json {
-        writeln!(
-            out,
-            "{:>7} {:>12} {:>8} {:>7} {:>9} {:>12}  end",
-            "episode", "return", "success", "steps", "time_s", "steps/s"
-        )
-        .map_err(io)?;
-    }
-    let mut total_steps = 0u64;
-    let mut total_time = 0.0;
-    let mut returns = Vec::new();
-    let mut lengths = Vec::new();
-    let mut successes = Vec::new();
-    let mut errors = 0u64;
-    // episodes per way of ending (`ended` of the JSON summary)
-    let mut ends: std::collections::BTreeMap<&'static str, u64> = Default::default();
-    let mut progress = Progress::new(steps * args.episodes);
-    for ep in 0..args.episodes {
-        let seed = args.seed.wrapping_add(ep);
-        match (&args.load_state, ep) {
-            (Some(path), 0) => env.load_state_file(path).map_err(|e| {
-                CliError::input(match e {
-                    // names the file already
-                    StateError::Io { .. } => format!("--load-state {e}"),
-                    _ => format!("--load-state {}: {e}", path.display()),
-                })
-            })?,
-            _ => {
-                env.reset(Some(seed));
-            }
-        }
-        policy.reset(seed);
-        if let Some(r) = recorder.as_mut() {
-            r.capture(&env.app.world, 0, || {
-                format!("episode {ep}  seed {seed}  step 0")
-            })?;
-        }
-        let t = Instant::now();
-        let mut ret = 0.0;
-        let mut length = 0;
-        let mut success = None;
-        let mut error = None;
-        // the run's --steps ends it unless the episode ends first
-        let mut end = EpisodeEnd::Steps;
-        for i in 0..steps {
-            if let Err(e) = policy.act(&env, &mut action) {
-                error = Some(format!("policy: {e}"));
-                end = EpisodeEnd::Error;
-                break;
-            }
-            let o = env.step(&action);
-            ret += o.reward;
-            length = i + 1;
-            if let Some(r) = recorder.as_mut() {
-                r.capture(&env.app.world, length, || {
-                    format!(
-                        "episode {ep}  step {length}  reward {:.3}  return {ret:.3}  success {}",
-                        o.reward,
-                        o.info.success.map_or("-".to_string(), |s| s.to_string())
-                    )
-                })?;
-            }
-            progress.update(ep * steps + i + 1);
-            if o.terminated || o.truncated {
-                success = final_success(success, o.info.success, o.info.error.is_some());
-                error = o.info.error.clone();
-                end = EpisodeEnd::of(&o);
-                break;
-            }
-            success = o.info.success;
-        }
-        // The last dumped state is the state after the final step (before any autoreset).
-        if ep + 1 == args.episodes {
-            if let Some(path) = &args.dump_state {
-                dump_final(&mut env, &args.target, seed, length, path)?;
-            }
-            if let Some(path) = &args.save_state {
-                env.save_state_file(path)
-                    .map_err(|e| CliError::runtime(format!("--save-state {e}")))?;
-            }
-        }
-        let wall = t.elapsed().as_secs_f64();
-        total_steps += length;
-        total_time += wall;
-        returns.push(ret);
-        lengths.push(length);
-        if let Some(s) = success {
-            successes.push(s);
-        }
-        if error.is_some() {
-            errors += 1;
-        }
-        *ends.entry(end.name()).or_default() += 1;
-        let sps = length as f64 / wall.max(1e-12);
-        if args.json {
-            writeln!(
-                out,
-                "{}",
-                json!({"episode": ep, "seed": seed, "return": ret, "length": length,
-                       "success": success, "error": error, "ended": end.name(),
-                       "terminations": end.terminations(), "wall_s": wall, "steps_per_s": sps})
-            )
-            .map_err(io)?;
-        } else {
-            writeln!(
-                out,
-                "{:>7} {:>12.4} {:>8} {:>7} {:>9.3} {:>12.0}  {}",
-                ep,
-                ret,
-                success.map_or("-".to_string(), |s| s.to_string()),
-                length,
-                wall,
-                sps,
-                match &error {
-                    Some(e) => format!("error: {e}"),
-                    None => end.to_string(),
-                }
-            )
-            .map_err(io)?;
-        }
-    }
-    progress.finish();
-    if let Some(r) = recorder {
-        r.finish(out, args.json)?;
-    }
-    let n = args.episodes as f64;
-    let mean_return = returns.iter().sum::<f64>() / n;
-    let mean_length = lengths.iter().sum::<u64>() as f64 / n;
-    let success_rate = if successes.is_empty() {
-        None
-    } else {
-        Some(successes.iter().filter(|s| **s).count() as f64 / successes.len() as f64)
-    };
-    let sps = total_steps as f64 / total_time.max(1e-12);
-    if args.json {
-        writeln!(
-            out,
-            "{}",
-            json!({"summary": true, "target": args.target, "episodes": args.episodes,
-                   "success_rate": success_rate, "mean_return": mean_return,
-                   "mean_length": mean_length, "errors": errors, "ended": ends,
-                   "env_steps_per_s": sps})
-        )
-        .map_err(io)?;
-    } else {
-        writeln!(
-            out,
-            "summary: {} episodes, success rate {}, mean return {:.4}, mean length {:.1}, errors {}, {:.0} env steps/s",
-            args.episodes,
-            success_rate.map_or("n/a (no success criterion)".to_string(), |r| format!("{:.1} %", 100.0 * r)),
-            mean_return,
-            mean_length,
-            errors,
-            sps
-        )
-        .map_err(io)?;
-    }
-    Ok(())
 }
 
 /// The policy of `run --policy`: a built-in kind, or a trained policy's folder.

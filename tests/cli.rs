@@ -104,6 +104,50 @@ fn run_json_prints_one_object_per_episode_and_a_summary() {
     assert!(lines[3]["env_steps_per_s"].as_f64().unwrap() > 0.0);
 }
 
+/// `run --json`'s lines without the wall-time keys.
+fn episodes_json(args: &[&str]) -> Vec<serde_json::Value> {
+    stdout_ok(modesuite().args(args))
+        .lines()
+        .map(|l| {
+            let mut v: serde_json::Value = serde_json::from_str(l).unwrap();
+            let o = v.as_object_mut().unwrap();
+            for k in ["wall_s", "steps_per_s", "env_steps_per_s"] {
+                o.remove(k);
+            }
+            v
+        })
+        .collect()
+}
+
+#[test]
+fn episodes_run_side_by_side_on_threads_give_the_same_results() {
+    // the expert on Franka Place (FEM rod, rigid robot): 5 episodes on 1, 2 and 3 threads
+    let run = |threads: &str| {
+        episodes_json(&[
+            "run",
+            "MoDe-Franka-Place-v0",
+            "--policy",
+            "scripted",
+            "--episodes",
+            "5",
+            "--seed",
+            "7",
+            "--json",
+            "--threads",
+            threads,
+        ])
+    };
+    let one = run("1");
+    assert_eq!(one.len(), 6);
+    for (i, l) in one[..5].iter().enumerate() {
+        assert_eq!(l["episode"], i, "{l}");
+        assert_eq!(l["seed"], 7 + i, "{l}");
+    }
+    println!("summary on 1 thread: {}", one[5]);
+    assert_eq!(run("2"), one);
+    assert_eq!(run("3"), one);
+}
+
 #[test]
 fn bench_json_has_the_stable_keys() {
     let text = stdout_ok(modesuite().args(["bench", "engine", "--json", "--scale", "0.002"]));

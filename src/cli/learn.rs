@@ -4,7 +4,7 @@
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
-use super::{io, run, CliError, RunArgs};
+use super::{io, CliError, RunArgs};
 use crate::learning::{self, TrainRequest, EVAL_SEED};
 
 /// Arguments of `train`.
@@ -74,6 +74,10 @@ pub struct EvalArgs {
     /// Print one JSON object per episode and a summary (the keys of `run --json`).
     #[arg(long)]
     pub json: bool,
+    /// Threads running episodes side by side (`0`: all cores; `run --threads`): the results
+    /// are the same for any number.
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }
 
 /// Arguments of `plot`.
@@ -213,8 +217,9 @@ pub fn eval(args: &EvalArgs, out: &mut dyn Write) -> Result<(), CliError> {
         policy: args.dir.display().to_string(),
         actions: origin.actions,
         rgbd: None,
+        threads: args.threads,
     };
-    run(&run_args, out)
+    super::run::run(&run_args, out)
 }
 
 /// `modesuite plot`.
