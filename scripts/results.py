@@ -121,7 +121,14 @@ def one_run(binary: str, root: Path, algo: str, task: str, seed: int) -> None:
 def table(root: Path) -> str:
     rows = ["| algo | task | seed | env steps | train wall (s) | eval success (20, seeds 1e6+) | eval return | first eval >= 90 %: env steps / train wall (s) |",
             "|---|---|---|---|---|---|---|---|"]
-    for algo, task, seed in PLAN:
+    # the plan's runs, then any other run with a ledger (more seeds), in name order
+    extra = []
+    for f in sorted(LEDGER.glob("*-seed*.jsonl")):
+        algo, rest = f.stem.split("-", 1)
+        task, _, seed = rest.rpartition("-seed")
+        if algo in ALGOS and seed.isdigit() and (algo, task, int(seed)) not in PLAN:
+            extra.append((algo, task, int(seed)))
+    for algo, task, seed in PLAN + extra:
         ev = read_lines(run_dir(root, algo, task, seed) / "evals.jsonl") or read_lines(
             ledger_path(algo, task, seed))
         if not ev:
@@ -146,8 +153,14 @@ def main() -> None:
         return
     plan = PLAN
     if args.only:
-        wanted = {tuple(o.split("/")) for o in args.only}
-        plan = [r for r in PLAN if (r[0], r[1], str(r[2])) in wanted]
+        # any run, in the order given (more seeds than the plan's, say)
+        plan = []
+        for o in args.only:
+            parts = o.split("/")
+            if len(parts) != 3 or parts[0] not in ALGOS or not parts[2].isdigit():
+                p.error(f"--only {o}: expected algo/task/seed with algo one of {sorted(ALGOS)}, "
+                        "e.g. ppo/MoDe-Franka-Place-v0/0")
+            plan.append((parts[0], parts[1], int(parts[2])))
     for algo, task, seed in plan:
         one_run(args.bin, args.runs, algo, task, seed)
 
