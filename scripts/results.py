@@ -11,7 +11,8 @@ metrics), the success rate and mean return. A run stops at its budget or at its 
 evaluation with every episode successful; the policy of its best evaluation so far is kept in
 `best_policy/` (with `eval.json`), since a later chunk can do worse (SAC especially). Killed at any moment, it continues where it was: a
 chunk already evaluated is not evaluated again, and training resumes from its checkpoint.
-`--table` prints the markdown table of all evaluations found.
+`--table` prints the markdown table of all evaluations found, `--summary` one row per algorithm
+and task (seeds, best and last held-out success per seed).
 
 Every evaluation line is also appended to `docs/results/evals/<algo>-<task>-seed<k>.jsonl`, which
 is committed: `runs/` (checkpoints, metrics) stays on the machine that trained, the record of
@@ -141,15 +142,44 @@ def table(root: Path) -> str:
     return "\n".join(rows)
 
 
+def summary() -> str:
+    """One row per algorithm and task from the committed ledgers: the seeds run, each seed's
+    best and last held-out success, and where each first reached 20 of 20."""
+    runs: dict[tuple[str, str], list[tuple[int, list[dict]]]] = {}
+    for f in sorted(LEDGER.glob("*-seed*.jsonl")):
+        algo, rest = f.stem.split("-", 1)
+        task, _, seed = rest.rpartition("-seed")
+        ev = read_lines(f)
+        if algo in ALGOS and seed.isdigit() and ev:
+            runs.setdefault((algo, task), []).append((int(seed), ev))
+    rows = ["| algo | task | seeds | best held-out success per seed | last evaluation per seed | first 20/20 (env steps) |",
+            "|---|---|---|---|---|---|"]
+    order = {t: i for i, t in enumerate(f"MoDe-{r}-{t}-v0" for r in ("Franka", "Spot") for t in ELASTIC)}
+    for (algo, task), seeds in sorted(runs.items(), key=lambda kv: (kv[0][0], order.get(kv[0][1], 99))):
+        seeds.sort()
+        pct = lambda e: f"{100 * (e['success_rate'] or 0):.0f} %"
+        best = ", ".join(pct(max(ev, key=lambda e: e["success_rate"] or 0)) for _, ev in seeds)
+        last = ", ".join(f"{pct(ev[-1])} at {ev[-1]['env_steps']:,}" for _, ev in seeds)
+        first = ", ".join(next((f"{e['env_steps']:,}" for e in ev if e["success_rate"] == 1.0), "-")
+                          for _, ev in seeds)
+        rows.append(f"| {algo.upper()} | {task} | {', '.join(str(k) for k, _ in seeds)} | {best} | {last} | {first} |")
+    return "\n".join(rows)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--bin", default=os.path.expanduser("~/.cache/modesuite-target/release/modesuite"))
     p.add_argument("--runs", default="runs", type=Path)
     p.add_argument("--only", nargs="*", help="algo/task/seed, e.g. ppo/MoDe-Franka-Place-v0/0")
     p.add_argument("--table", action="store_true")
+    p.add_argument("--summary", action="store_true",
+                   help="one row per algorithm and task from docs/results/evals/")
     args = p.parse_args()
     if args.table:
         print(table(args.runs))
+        return
+    if args.summary:
+        print(summary())
         return
     plan = PLAN
     if args.only:
