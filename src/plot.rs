@@ -265,7 +265,15 @@ where
         chart.draw_series(LineSeries::new([(x, y0), (x, y1)], grid))?;
         chart.draw_series(LineSeries::new([(x0, y), (x1, y)], grid))?;
         let (px, py) = chart.backend_coord(&(x, y0));
-        labels.push((px - 20, py + 8, tick(x, x1 - x0), INK));
+        // the last tick's label ends at its tick, inside the panel (centred it ran off the
+        // image's right edge)
+        let text = tick(x, x1 - x0);
+        let shift = if k == 5 {
+            12 * text.len() as i32 - 12
+        } else {
+            20
+        };
+        labels.push((px - shift, py + 8, text, INK));
         let (px, py) = chart.backend_coord(&(x0, y));
         labels.push((px - 84, py - 8, tick(y, y1 - y0), INK));
     }
