@@ -1,6 +1,7 @@
 //! `modesuite plot`: training curves of one or more runs (seeds) as a PNG, in the style of the
 //! MoDeSuite paper's figures: the mean over runs as a line and one standard deviation as a
-//! band, episode return on the left and success rate on the right, against env steps. Where a
+//! band, episode return on the left and success rate on the right, against env steps (each
+//! run's training episodes averaged over the last [`WINDOW_EPISODES`] that ended). Where a
 //! run folder has an `evals.jsonl` (the held-out evaluations `scripts/results.py` appends: one
 //! JSON object per line with `env_steps` and `success_rate`), the success panel also shows each
 //! evaluation as a dot and their mean over the runs as an orange line.
@@ -26,22 +27,53 @@ pub struct Curve {
     pub std: Vec<f64>,
 }
 
-/// The curve of `value` over `runs` (each a run's metrics in order) on `points` env-step
-/// values from the first logged step to the last step every run reached; each run counts with
-/// its latest value at or before each point. `None` when no run has the value.
+/// The training curves' window: each point averages the episodes that ended in the most recent
+/// iterations, back to at least this many (an iteration of 16 envs ends a few long episodes,
+/// often none or one, so its own mean jumps between 0 and 100 %).
+pub const WINDOW_EPISODES: u64 = 20;
+
+/// `value` (a mean over the episodes an iteration ended) at each iteration that ended any,
+/// averaged, weighted by episodes, over the most recent such iterations holding at least
+/// `window` episodes (all of them until there are that many).
+pub fn rolling(
+    run: &[Metrics],
+    value: fn(&Metrics) -> Option<f64>,
+    window: u64,
+) -> Vec<(f64, f64)> {
+    let points: Vec<(f64, f64, u64)> = run
+        .iter()
+        .filter_map(|m| {
+            value(m)
+                .filter(|v| v.is_finite())
+                .map(|v| (m.env_steps as f64, v, m.episodes.max(1)))
+        })
+        .collect();
+    (0..points.len())
+        .map(|i| {
+            let (mut sum, mut n) = (0.0, 0u64);
+            for &(_, v, k) in points[..=i].iter().rev() {
+                sum += v * k as f64;
+                n += k;
+                if n >= window {
+                    break;
+                }
+            }
+            (points[i].0, sum / n as f64)
+        })
+        .collect()
+}
+
+/// The curve of `value` over `runs` (each a run's metrics in order), each run's values averaged
+/// over `window` episodes ([`rolling`]), on `points` env-step values from the first logged step
+/// to the last step every run reached; each run counts with its latest value at or before each
+/// point. `None` when no run has the value.
 pub fn curve(
     runs: &[Vec<Metrics>],
     value: fn(&Metrics) -> Option<f64>,
+    window: u64,
     points: usize,
 ) -> Option<Curve> {
-    let series: Vec<Vec<(f64, f64)>> = runs
-        .iter()
-        .map(|r| {
-            r.iter()
-                .filter_map(|m| value(m).map(|v| (m.env_steps as f64, v)))
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    let series: Vec<Vec<(f64, f64)>> = runs.iter().map(|r| rolling(r, value, window)).collect();
     series_curve(&series, points)
 }
 
@@ -145,8 +177,13 @@ pub fn plot(dirs: &[PathBuf], out: &Path, title: &str) -> Result<(), MakeError> 
     }
     let runs = load_runs(dirs).map_err(MakeError::Input)?;
     let evals = load_evaluations(dirs).map_err(MakeError::Input)?;
-    let ret = curve(&runs, |m| m.return_mean, 200);
-    let succ = curve(&runs, |m| m.success_rate.map(|s| 100.0 * s), 200);
+    let ret = curve(&runs, |m| m.return_mean, WINDOW_EPISODES, 200);
+    let succ = curve(
+        &runs,
+        |m| m.success_rate.map(|s| 100.0 * s),
+        WINDOW_EPISODES,
+        200,
+    );
     let held_out = Held {
         mean: series_curve(&evals, 200),
         points: evals.concat(),
@@ -265,11 +302,11 @@ where
         chart.draw_series(LineSeries::new([(x, y0), (x, y1)], grid))?;
         chart.draw_series(LineSeries::new([(x0, y), (x1, y)], grid))?;
         let (px, py) = chart.backend_coord(&(x, y0));
-        // the last tick's label ends at its tick, inside the panel (centred it ran off the
-        // image's right edge)
+        // the last tick's label ends just past its tick, inside the image (it ran off the
+        // right edge; a label is 12 px per character and 6 px of padding wide)
         let text = tick(x, x1 - x0);
         let shift = if k == 5 {
-            12 * text.len() as i32 - 12
+            12 * text.len() as i32 - 8
         } else {
             20
         };
@@ -339,6 +376,8 @@ fn tick(v: f64, span: f64) -> String {
     let a = v.abs();
     if span >= 5e6 || (a >= 1e6 && span >= 5e5) {
         format!("{:.1}M", v / 1e6)
+    } else if span >= 5e4 {
+        format!("{:.0}k", v / 1e3)
     } else if span >= 5e3 || (a >= 1e4 && span >= 500.0) {
         format!("{:.1}k", v / 1e3)
     } else {
@@ -362,10 +401,36 @@ mod tests {
     #[test]
     fn ticks_show_the_digits_their_range_needs() {
         assert_eq!(tick(1_500_000.0, 5e6), "1.5M");
-        assert_eq!(tick(250_000.0, 1e6), "250.0k");
+        assert_eq!(tick(250_000.0, 1e6), "250k");
+        assert_eq!(tick(153_600.0, 153_600.0), "154k");
+        assert_eq!(tick(12_500.0, 25_000.0), "12.5k");
         assert_eq!(tick(-1702.1, 8.0), "-1702.10");
         assert_eq!(tick(0.35, 1.0), "0.35");
         assert_eq!(tick(80.0, 100.0), "80");
+    }
+
+    #[test]
+    fn rolling_means_weigh_iterations_by_their_episodes_back_to_the_window() {
+        let with = |steps: u64, ret: f64, episodes: u64| Metrics {
+            episodes,
+            ..m(steps, ret)
+        };
+        let run = vec![
+            with(1, 10.0, 1),
+            m(2, f64::NAN),
+            with(3, 20.0, 3),
+            with(4, 0.0, 2),
+        ];
+        // window 4: the first point alone; then (10 + 3 * 20) / 4; then (3 * 20 + 2 * 0) / 5
+        assert_eq!(
+            rolling(&run, |m| m.return_mean, 4),
+            vec![(1.0, 10.0), (3.0, 17.5), (4.0, 12.0)]
+        );
+        // window 1: each iteration's own mean
+        assert_eq!(
+            rolling(&run, |m| m.return_mean, 1),
+            vec![(1.0, 10.0), (3.0, 20.0), (4.0, 0.0)]
+        );
     }
 
     #[test]
@@ -396,7 +461,7 @@ mod tests {
             vec![m(0, 0.0), m(100, 2.0)],
             vec![m(0, 2.0), m(50, 4.0), m(100, 6.0)],
         ];
-        let c = curve(&runs, |m| m.return_mean, 3).unwrap();
+        let c = curve(&runs, |m| m.return_mean, 1, 3).unwrap();
         assert_eq!(c.x, [0.0, 50.0, 100.0]);
         assert_eq!(c.mean, [1.0, 2.0, 4.0]);
         assert_eq!(c.std, [1.0, 2.0, 2.0]);
