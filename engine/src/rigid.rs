@@ -278,6 +278,11 @@ impl RigidContext {
         self.body_ids.get(id as usize).copied()
     }
 
+    /// Whether `b` is a scene body (its colliders carry [`SCENE_BODY_TAG`]; robots' links do not).
+    pub fn is_scene_body(&self, b: &RigidBody) -> bool {
+        self.tag_of(b) == SCENE_BODY_TAG
+    }
+
     /// The `user_data` of a body's first collider (robots' links: 0; [`SCENE_BODY_TAG`]).
     fn tag_of(&self, b: &RigidBody) -> u128 {
         b.colliders()

@@ -287,6 +287,9 @@ pub struct WithoutRigidSide<'a> {
     inner: RigidPart<'a>,
     rigid: &'a RigidContext,
     surface: &'a RigidSurface,
+    /// The dynamic scene bodies this deformable resolves, seen moving with the common motion
+    /// of the body and the nodes touching it ([`inelastic_shifts`]).
+    shifts: Vec<Shift>,
 }
 
 impl<'a> WithoutRigidSide<'a> {
@@ -296,8 +299,126 @@ impl<'a> WithoutRigidSide<'a> {
             inner: RigidPart::Borrowed(rigid),
             rigid,
             surface,
+            shifts: Vec::new(),
         }
     }
+
+    /// [`WithoutRigidSide::new`], with the dynamic scene bodies the deformable resolves seen at
+    /// their common velocity with the nodes touching them ([`inelastic_shifts`]).
+    pub fn with_touching(
+        rigid: &'a RigidContext,
+        surface: &'a RigidSurface,
+        solver: &dyn crate::deformable::DeformableSolver,
+        thickness: f64,
+    ) -> Self {
+        let mut q = Self::new(rigid, surface);
+        q.shifts = inelastic_shifts(rigid, surface, solver, thickness);
+        q
+    }
+}
+
+/// A body's motion as a deformable sees it, changed: `velocity(p) + dv + dw x (p - com)`.
+#[derive(Clone, Copy, Debug)]
+pub struct Shift {
+    /// Body id.
+    pub body: u32,
+    /// Centre of mass, m.
+    pub com: Vector3<f64>,
+    /// Change of linear velocity, m/s.
+    pub dv: Vector3<f64>,
+    /// Change of angular velocity, rad/s.
+    pub dw: Vector3<f64>,
+}
+
+/// For each dynamic scene body the deformable of `surface` resolves (a body on a layer it
+/// presses onto a support, or one heavier than the deformable): the change from the body's
+/// motion to the common rigid motion of the body (mass M, velocity v, inertia I, angular
+/// velocity w) and the deformable's nodes within `thickness` + 2 mm of its colliders (masses
+/// m_i at r_i from the centre of mass, velocities u_i): linear `(M v + sum m_i u_i) / (M + sum
+/// m_i)`, angular `(I + sum m_i [r_i]^T [r_i])^-1 (I w + sum m_i r_i x (u_i - v'))` with v' that
+/// linear velocity (momentum and angular momentum about the centre of mass kept).
+///
+/// Why: the deformable moves its touching nodes with the body it treats as a moving collider and
+/// hands the body the impulse back after its step; seen at the body's own velocity, the nodes'
+/// momentum change `m (v - u)` overshoots the body by `m / M` of their relative velocity, a mode
+/// that flips sign every substep (a 2 kg box on the 2.7 kg foam block trembled at 1.55 cm/s,
+/// ARCHITECTURE.md). Seen at the common velocity, the impulse the nodes take is exactly what
+/// brings the body to that velocity, as an inelastic collision does.
+pub fn inelastic_shifts(
+    rigid: &RigidContext,
+    surface: &RigidSurface,
+    solver: &dyn crate::deformable::DeformableSolver,
+    thickness: f64,
+) -> Vec<Shift> {
+    let (Some(v), Some(m)) = (solver.node_velocities(), solver.node_masses()) else {
+        return Vec::new();
+    };
+    let x = solver.node_positions();
+    let reach = thickness + super::support::SUPPORT_GAP;
+    let mut out = Vec::new();
+    for id in 0u32.. {
+        let Some((h, _)) = rigid.body_of_id(id) else {
+            break;
+        };
+        let Some(b) = rigid.bodies.get(h) else {
+            continue;
+        };
+        if !b.is_dynamic()
+            || !rigid.is_scene_body(b)
+            || rigid.resolves_with_surface(id, surface.object, surface.mass)
+        {
+            continue;
+        }
+        let colliders: Vec<&Collider> = b
+            .colliders()
+            .iter()
+            .filter_map(|c| rigid.colliders.get(*c))
+            .collect();
+        let com = vec_from_rapier(b.center_of_mass());
+        let (mut mass, mut momentum) = (0.0, Vector3::zeros());
+        let (mut inertia, mut angular) = (nalgebra::Matrix3::zeros(), Vector3::zeros());
+        let mut first = Vector3::zeros();
+        for (i, p) in x.iter().enumerate() {
+            let touching = colliders.iter().any(|co| {
+                let q = vec_to_rapier(p);
+                let proj = co.shape().project_point(co.position(), q, true);
+                f64::from((q - proj.point).length()) <= reach
+            });
+            if touching {
+                let mi = m.get(i).copied().unwrap_or(0.0);
+                let ui = v.get(i).copied().unwrap_or_default();
+                let r = p - com;
+                mass += mi;
+                momentum += ui * mi;
+                inertia +=
+                    (nalgebra::Matrix3::identity() * r.norm_squared() - r * r.transpose()) * mi;
+                angular += r.cross(&ui) * mi;
+                first += r * mi;
+            }
+        }
+        let body_mass = f64::from(b.mass());
+        let inv = b.mass_properties().effective_world_inv_inertia;
+        let inv = nalgebra::Matrix3::new(
+            inv.m11, inv.m12, inv.m13, inv.m12, inv.m22, inv.m23, inv.m13, inv.m23, inv.m33,
+        )
+        .cast::<f64>();
+        let (Some(body_inertia), true) = (inv.try_inverse(), mass > 0.0 && body_mass > 0.0) else {
+            continue;
+        };
+        let vb = vec_from_rapier(b.linvel());
+        let wb = vec_from_rapier(b.angvel());
+        let common = (vb * body_mass + momentum) / (body_mass + mass);
+        let spin = (body_inertia + inertia).try_inverse().map_or(wb, |k| {
+            k * (body_inertia * wb + angular - first.cross(&common))
+        });
+        out.push(Shift {
+            body: id,
+            com,
+            dv: common - vb,
+            dw: spin - wb,
+        });
+    }
+    out
 }
 
 impl ContactQuery for WithoutRigidSide<'_> {
@@ -312,6 +433,10 @@ impl ContactQuery for WithoutRigidSide<'_> {
                 .resolves_with_surface(out[k].body, s.object, s.mass)
             {
                 out[kept] = out[k];
+                if let Some(sh) = self.shifts.iter().find(|sh| sh.body == out[k].body) {
+                    let c = &mut out[kept];
+                    c.velocity += sh.dv + sh.dw.cross(&(c.point - sh.com));
+                }
                 kept += 1;
             }
         }
@@ -327,6 +452,7 @@ impl ContactQuery for WithoutRigidSide<'_> {
             inner,
             rigid: self.rigid,
             surface: self.surface,
+            shifts: self.shifts.clone(),
         }))
     }
 }

@@ -17,7 +17,9 @@ use crate::app::SimErrors;
 use crate::codec::{Decoder, Encoder, Persist, StateError};
 use crate::components::{DeformableNodes, Object};
 use crate::contact::rigid_side::{RigidSurfaces, SurfaceSync, WithoutRigidSide};
-use crate::contact::{deliver, ContactImpulses, ContactRefresh, DeformableContacts};
+use crate::contact::{
+    deliver, ContactImpulses, ContactRefresh, ContactSurface, DeformableContacts,
+};
 use crate::coupling::{ContactQuery, GripperState, Grippers, NoColliders, Reaction};
 use crate::rigid::{DeformableSystems, RigidContext};
 use crate::state::{mismatch, HashState, PluginStates, StateHasher, Stateful};
@@ -233,6 +235,7 @@ fn deformable_step<S: DeformableSolver>(
     mut impulses: Option<ResMut<ContactImpulses>>,
     rigid_surfaces: Option<Res<RigidSurfaces>>,
     names: Query<&Object>,
+    contact_surfaces: Query<&ContactSurface>,
 ) {
     // Substep index within the physics step; deformables step at the first of every stride.
     let index = clock.substeps % u64::from(settings.step_substeps());
@@ -295,9 +298,11 @@ fn deformable_step<S: DeformableSolver>(
             let without;
             let rigid_query: &dyn ContactQuery = match rigid.as_deref() {
                 Some(r) => match rigid_surfaces.as_deref().and_then(|s| s.of(entity)) {
-                    // bodies lighter than this one resolve their contact with it themselves
+                    // bodies lighter than this one resolve their contact with it themselves; the
+                    // dynamic scene bodies it resolves are seen moving with the nodes they touch
                     Some(s) => {
-                        without = WithoutRigidSide::new(r, s);
+                        let thickness = contact_surfaces.get(entity).map_or(0.0, |c| c.thickness);
+                        without = WithoutRigidSide::with_touching(r, s, &body.solver, thickness);
                         &without
                     }
                     None => r,
