@@ -147,64 +147,46 @@ fn sac_solves_pendulum_deterministically() {
     }
 }
 
-/// Hides `save_state`, so the trainer falls back to resetting the environments at each
-/// checkpoint.
-struct Stateless<E>(E);
-
-impl<E: VecEnvironment> VecEnvironment for Stateless<E> {
-    fn num_envs(&self) -> usize {
-        self.0.num_envs()
-    }
-    fn obs_dim(&self) -> usize {
-        self.0.obs_dim()
-    }
-    fn act_dim(&self) -> usize {
-        self.0.act_dim()
-    }
-    fn action_bounds(&self) -> (Vec<f32>, Vec<f32>) {
-        self.0.action_bounds()
-    }
-    fn identity(&self) -> String {
-        self.0.identity()
-    }
-    fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
-        self.0.reset(seed)
-    }
-    fn step(&mut self, actions: &[f32]) -> Result<modesuite_learn::BatchStep, String> {
-        self.0.step(actions)
-    }
+/// An environment with part of its state handling taken away: without `saves` it hides
+/// `save_state` (the trainer then resets the environments at each checkpoint); without
+/// `restores` it cannot restore a saved state (a checkpoint of another build of the simulator).
+struct Limited<E> {
+    env: E,
+    saves: bool,
+    restores: bool,
 }
 
-/// Saves its state but cannot restore one (a checkpoint of another build of the simulator).
-struct Unrestorable<E>(E);
-
-impl<E: VecEnvironment> VecEnvironment for Unrestorable<E> {
+impl<E: VecEnvironment> VecEnvironment for Limited<E> {
     fn num_envs(&self) -> usize {
-        self.0.num_envs()
+        self.env.num_envs()
     }
     fn obs_dim(&self) -> usize {
-        self.0.obs_dim()
+        self.env.obs_dim()
     }
     fn act_dim(&self) -> usize {
-        self.0.act_dim()
+        self.env.act_dim()
     }
     fn action_bounds(&self) -> (Vec<f32>, Vec<f32>) {
-        self.0.action_bounds()
+        self.env.action_bounds()
     }
     fn identity(&self) -> String {
-        self.0.identity()
+        self.env.identity()
     }
     fn reset(&mut self, seed: u64) -> Result<Vec<f32>, String> {
-        self.0.reset(seed)
+        self.env.reset(seed)
     }
     fn step(&mut self, actions: &[f32]) -> Result<modesuite_learn::BatchStep, String> {
-        self.0.step(actions)
+        self.env.step(actions)
     }
     fn save_state(&self) -> Option<Vec<u8>> {
-        self.0.save_state()
+        self.saves.then(|| self.env.save_state()).flatten()
     }
-    fn load_state(&mut self, _state: &[u8]) -> Result<(), String> {
-        Err("written by another build".into())
+    fn load_state(&mut self, state: &[u8]) -> Result<(), String> {
+        if self.restores {
+            self.env.load_state(state)
+        } else {
+            Err("written by another build".into())
+        }
     }
 }
 
@@ -221,10 +203,18 @@ fn a_run_whose_saved_envs_cannot_be_restored_resumes_with_reset_envs() {
         checkpoint_every: 2,
         ..RunOptions::new(&dir, total)
     };
-    let mut env = Unrestorable(PointReach::new(4));
+    let mut env = Limited {
+        env: PointReach::new(4),
+        saves: true,
+        restores: false,
+    };
     let first = train(&cfg, &mut env, &opts(4 * 16 * 2), &mut Silent).unwrap();
     assert_eq!(first.envs_reset, None);
-    let mut env = Unrestorable(PointReach::new(4));
+    let mut env = Limited {
+        env: PointReach::new(4),
+        saves: true,
+        restores: false,
+    };
     let rest = train(&cfg, &mut env, &opts(4 * 16 * 4), &mut Silent).unwrap();
     assert!(rest.resumed && rest.iterations == 4);
     assert_eq!(rest.envs_reset.as_deref(), Some("written by another build"));
@@ -370,7 +360,11 @@ fn ppo_resume_is_bit_identical() {
     resume_matches(
         "ppo-resume-stateless",
         &cfg,
-        || Stateless(PointReach::new(8)),
+        || Limited {
+            env: PointReach::new(8),
+            saves: false,
+            restores: true,
+        },
         8 * 16 * 7,
         2,
         3,

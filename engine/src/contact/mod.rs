@@ -303,6 +303,11 @@ fn spread_over_corners(
 /// coupling scheme.
 pub const RELAXATION: f64 = 0.5;
 
+/// Gap, m, beyond a surface's contact thickness within which a node counts as touching a body
+/// (`rigid_side::inelastic_shifts`) and a layer's far side as resting on a fixed collider
+/// (`support`); here, where both read it.
+pub const SUPPORT_GAP: f64 = 2e-3;
+
 /// Impulses (N s per node, world frame) other bodies' contacts owe one deformable body.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct OwedImpulses {

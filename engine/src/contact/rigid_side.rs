@@ -354,7 +354,7 @@ pub fn inelastic_shifts(
         return Vec::new();
     };
     let x = solver.node_positions();
-    let reach = thickness + super::support::SUPPORT_GAP;
+    let reach = thickness + super::SUPPORT_GAP;
     let mut out = Vec::new();
     for id in 0u32.. {
         let Some((h, _)) = rigid.body_of_id(id) else {

@@ -61,9 +61,7 @@ pub const STABLE_RATIO: f64 = 0.5;
 /// STABLE_RATIO))`).
 pub const MAX_COUPLING_SUBSTEPS: u32 = 6;
 
-/// Gap, m, beyond the surface's contact thickness within which a node counts as touching the
-/// body and a layer's far side as resting on a fixed collider.
-pub const SUPPORT_GAP: f64 = 2e-3;
+pub use super::SUPPORT_GAP;
 
 /// A ray through the layer starts this far (m) inside it, clear of the node's own triangles.
 const RAY_START: f64 = 1e-5;
