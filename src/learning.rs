@@ -11,6 +11,7 @@
 use crate::inputs::Observer;
 use std::path::{Path, PathBuf};
 
+use modesuite_engine::codec::{Decoder, Encoder};
 use modesuite_engine::prelude::*;
 use modesuite_learn::{
     AlgoConfig, BatchStep, Control, LearnError, Metrics, PpoConfig, RunOptions, SacConfig,
@@ -27,25 +28,6 @@ pub const EVAL_SEED: u64 = 1_000_000;
 
 /// First bytes of [`SimEnv`]'s saved environments (inside a learner's checkpoint).
 const SIM_ENV_STATE: &[u8] = b"modesuite-simenv-1\n";
-
-/// Reads a byte slice front to back; running out is an error.
-struct Reader<'a>(&'a [u8]);
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
-        if self.0.len() < n {
-            return Err("the saved environments are truncated".into());
-        }
-        let (head, rest) = self.0.split_at(n);
-        self.0 = rest;
-        Ok(head)
-    }
-
-    fn u64(&mut self) -> Result<u64, String> {
-        let b = self.take(8)?;
-        Ok(u64::from_le_bytes(b.try_into().expect("8 bytes")))
-    }
-}
 
 /// A [`VecEnv`] of state observations and continuous actions, as the learners see it.
 ///
@@ -151,49 +133,30 @@ impl VecEnvironment for SimEnv {
     /// between checkpoints). `None` when some env cannot save its state (the learners then
     /// reset the envs at each checkpoint, in resumed and uninterrupted runs alike).
     fn save_state(&self) -> Option<Vec<u8>> {
-        let mut out = Vec::new();
-        out.extend_from_slice(SIM_ENV_STATE);
-        out.extend_from_slice(&(self.vec.len() as u64).to_le_bytes());
+        let mut e = Encoder::after(SIM_ENV_STATE.to_vec());
+        e.put(&(self.vec.len() as u64));
         for env in self.vec.envs() {
-            let bytes = env.save_state().ok()?;
-            out.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
-            out.extend_from_slice(&bytes);
+            e.put(&env.save_state().ok()?);
         }
-        out.extend_from_slice(&(self.last_obs.len() as u64).to_le_bytes());
-        for v in &self.last_obs {
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-        Some(out)
+        e.put(&self.last_obs);
+        e.into_bytes().ok()
     }
 
     fn load_state(&mut self, state: &[u8]) -> Result<(), String> {
-        let mut r = Reader(state);
-        if r.take(SIM_ENV_STATE.len())? != SIM_ENV_STATE {
+        let Some(body) = state.strip_prefix(SIM_ENV_STATE) else {
             return Err("the saved environments are not a modesuite SimEnv state".into());
-        }
-        let n = r.u64()? as usize;
-        if n != self.vec.len() {
-            return Err(format!(
-                "the saved environments are {n}, this run has {}",
-                self.vec.len()
-            ));
-        }
-        let mut files = Vec::with_capacity(n);
-        for _ in 0..n {
-            let len = r.u64()? as usize;
-            files.push(r.take(len)?);
-        }
-        let len = r.u64()? as usize;
-        let last_obs = r
-            .take(len.checked_mul(4).ok_or("corrupt saved environments")?)?
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
-        if !r.0.is_empty() {
-            return Err("the saved environments have trailing bytes".into());
-        }
+        };
+        let mut d = Decoder::new(body, "saved environments");
+        d.take_len("envs", self.vec.len())
+            .map_err(|e| e.to_string())?;
+        let files = (0..self.vec.len())
+            .map(|_| d.take::<Vec<u8>>())
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| e.to_string())?;
+        let last_obs: Vec<f32> = d.take().map_err(|e| e.to_string())?;
+        d.finish().map_err(|e| e.to_string())?;
         for (i, (env, bytes)) in self.vec.envs_mut().iter_mut().zip(files).enumerate() {
-            env.load_state(bytes)
+            env.load_state(&bytes)
                 .map_err(|e| format!("saved env {i}: {e}"))?;
         }
         self.last_obs = last_obs;

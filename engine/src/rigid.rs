@@ -323,7 +323,7 @@ impl RigidContext {
             .filter_map(|(h, _)| {
                 let b = self.bodies.get(*h)?;
                 let m = f64::from(b.mass());
-                (b.is_dynamic() && self.tag_of(b) == SCENE_BODY_TAG && m >= mass).then_some((*h, m))
+                (b.is_dynamic() && self.is_scene_body(b) && m >= mass).then_some((*h, m))
             })
             .collect()
     }

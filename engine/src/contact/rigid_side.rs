@@ -26,6 +26,7 @@
 
 use bevy_ecs::prelude::*;
 use nalgebra::Vector3;
+use rapier3d::parry::bounding_volume::BoundingVolume;
 use rapier3d::parry::query::PointQueryWithLocation;
 use rapier3d::prelude::*;
 
@@ -369,20 +370,22 @@ pub fn inelastic_shifts(
         {
             continue;
         }
-        let colliders: Vec<&Collider> = b
+        // each collider with its box loosened by the reach: a cheap test before the distance
+        let colliders: Vec<(&Collider, Aabb)> = b
             .colliders()
             .iter()
             .filter_map(|c| rigid.colliders.get(*c))
+            .map(|co| (co, co.compute_aabb().loosened(reach as f32)))
             .collect();
         let com = vec_from_rapier(b.center_of_mass());
         let (mut mass, mut momentum) = (0.0, Vector3::zeros());
         let (mut inertia, mut angular) = (nalgebra::Matrix3::zeros(), Vector3::zeros());
         let mut first = Vector3::zeros();
         for (i, p) in x.iter().enumerate() {
-            let touching = colliders.iter().any(|co| {
-                let q = vec_to_rapier(p);
-                let proj = co.shape().project_point(co.position(), q, true);
-                f64::from((q - proj.point).length()) <= reach
+            let q = vec_to_rapier(p);
+            let touching = colliders.iter().any(|(co, aabb)| {
+                aabb.contains_local_point(q)
+                    && f64::from(co.shape().distance_to_point(co.position(), q, true)) <= reach
             });
             if touching {
                 let mi = m.get(i).copied().unwrap_or(0.0);
