@@ -9,6 +9,7 @@
 //! then each `--set key=value`, then `--seed`.
 
 use crate::inputs::Observer;
+use modesuite_learn::policy::ChunkPlayer;
 use std::path::{Path, PathBuf};
 
 use modesuite_engine::codec::{Decoder, Encoder};
@@ -506,25 +507,26 @@ pub fn load_run_policy(
 }
 
 /// A learned policy acting in one env (`run --policy DIR`, `eval`). A policy of action chunks
-/// plays each chunk to its end before it observes again.
+/// plays them as its `policy.json` says: each to its end before it observes again, or
+/// ensembled at every step ([`modesuite_learn::policy::ChunkPlayer`]).
 pub struct LearnedPolicy {
     /// The network.
     pub policy: modesuite_learn::Policy,
     /// What it observes.
     pub inputs: Observer,
-    /// The current chunk (`chunk x act_dim` actions) and the index of the next one to play.
-    chunk: Vec<f32>,
-    next: usize,
+    /// The chunk actions still to play.
+    player: ChunkPlayer,
 }
 
 impl LearnedPolicy {
     /// `policy` observing `inputs`.
     pub fn new(policy: modesuite_learn::Policy, inputs: Observer) -> Self {
+        let m = policy.meta();
+        let player = ChunkPlayer::new(m.act_dim, m.chunk, m.ensemble);
         Self {
             policy,
             inputs,
-            chunk: Vec::new(),
-            next: 0,
+            player,
         }
     }
 }
@@ -554,24 +556,21 @@ pub fn act_on_inputs(
 
 impl modesuite_tasks::expert::Policy for LearnedPolicy {
     fn reset(&mut self, _seed: u64) {
-        self.chunk.clear();
+        self.player.reset();
     }
 
     fn act(&mut self, env: &Env, action: &mut [f32]) -> Result<(), String> {
         let p = &self.policy;
         let ad = p.act_dim();
-        let start = self.next * ad;
-        if start < self.chunk.len() {
-            action.copy_from_slice(&self.chunk[start..start + ad]);
-            self.next += 1;
+        if !self.player.needs_chunk() {
+            self.player.play(None, action);
             return Ok(());
         }
-        let chunk = &mut self.chunk;
+        let player = &mut self.player;
         act_on_inputs(&mut self.inputs, env, action, p.obs_dim(), ad, |o| {
-            *chunk = p.act_chunk(o);
-            chunk[..ad].to_vec()
-        })?;
-        self.next = 1;
-        Ok(())
+            let mut a = vec![0.0; ad];
+            player.play(Some(&p.act_chunk(o)), &mut a);
+            a
+        })
     }
 }

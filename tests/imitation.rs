@@ -172,7 +172,35 @@ fn bc_overfits_one_demonstration_and_replays_it() {
         run.lines().next().unwrap()
     );
     assert_eq!(summary["success_rate"], 1.0, "{run}");
-    for d in [data, a, b, r, h, c] {
+    // and acting with ACT's temporal ensembling (observing every step, the chunks' predictions
+    // for each step averaged) too
+    let e = scratch("e");
+    train(&data, &e, &["--set", "chunk=5", "--set", "ensemble=0.01"]);
+    let eo = e.to_str().unwrap();
+    let run = ok(cli(&["run", TASK, "--policy", eo, "--seed", "7", "--json"]));
+    let summary: serde_json::Value = serde_json::from_str(run.lines().last().unwrap()).unwrap();
+    println!(
+        "BC with chunks of 5, ensembled, from the demonstration's seed: {}",
+        run.lines().next().unwrap()
+    );
+    assert_eq!(summary["success_rate"], 1.0, "{run}");
+    // an ensemble without chunks is refused, naming the field
+    let o = cli(&[
+        "train",
+        TASK,
+        "--algo",
+        "bc",
+        "--dataset",
+        data.to_str().unwrap(),
+        "--out",
+        eo,
+        "--set",
+        "ensemble=0.01",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("ensemble = 0.01 (chunk 1)"), "{err}");
+    for d in [data, a, b, r, h, c, e] {
         let _ = std::fs::remove_dir_all(d);
     }
 }

@@ -49,6 +49,12 @@ pub struct BcConfig {
     /// repeated past its end) and a policy acting in an env plays a whole chunk before it looks
     /// again. 1 (default): one action per observation.
     pub chunk: usize,
+    /// ACT's temporal ensembling of the chunks (`chunk` > 1 only): `Some(m)` makes the policy
+    /// observe at every step and play the weighted mean of every chunk's prediction for that
+    /// step, the prediction made `i` steps ago weighted `exp(m i)` (the oldest weighs most, as
+    /// ACT's `exp(-m j)` with `j = 0` the oldest; ACT's m = 0.01); `None` (default): each chunk
+    /// played open-loop to its end. Kept in `policy.json` as `ensemble`.
+    pub ensemble: Option<f64>,
 }
 
 impl Default for BcConfig {
@@ -62,6 +68,7 @@ impl Default for BcConfig {
             seed: 0,
             obs_clip: 10.0,
             chunk: 1,
+            ensemble: None,
         }
     }
 }
@@ -91,11 +98,19 @@ impl BcConfig {
         if !(1..=MAX_CHUNK).contains(&self.chunk) {
             return bad(format!("chunk = {}: 1..={MAX_CHUNK} actions", self.chunk));
         }
+        if let Some(m) = self.ensemble {
+            if !(m.is_finite() && (0.0..=MAX_ENSEMBLE).contains(&m)) || self.chunk < 2 {
+                return bad(format!(
+                    "ensemble = {m} (chunk {}): a weight exponent in 0..={MAX_ENSEMBLE}, for chunk >= 2",
+                    self.chunk
+                ));
+            }
+        }
         Ok(())
     }
 }
 
-pub use crate::policy::MAX_CHUNK;
+pub use crate::policy::{MAX_CHUNK, MAX_ENSEMBLE};
 
 /// Demonstrations: one observation and the action taken per sample, row-major.
 #[derive(Clone, Debug, Default)]
@@ -338,6 +353,7 @@ pub fn train_bc(
         note: note.to_string(),
         discrete: demos.discrete,
         chunk: k,
+        ensemble: cfg.ensemble,
     };
     std::fs::create_dir_all(out).map_err(|e| LearnError::Io(format!("{}: {e}", out.display())))?;
     policy::write(out, &meta, record_bytes(actor.valid())?)?;

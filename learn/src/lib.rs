@@ -18,6 +18,7 @@
 pub mod actors;
 pub mod bc;
 pub mod checkpoint;
+pub mod chunks;
 pub mod config;
 pub mod dist;
 pub mod encoder;

@@ -20,6 +20,12 @@ use crate::LearnError;
 /// Largest action chunk of a policy ([`crate::bc::BcConfig::chunk`]).
 pub const MAX_CHUNK: usize = 100;
 
+/// Largest temporal-ensembling exponent ([`crate::bc::BcConfig::ensemble`]): the oldest of
+/// [`MAX_CHUNK`] predictions then weighs `exp(5 * 99)`, still a finite `f64`.
+pub const MAX_ENSEMBLE: f64 = 5.0;
+
+pub use crate::chunks::ChunkPlayer;
+
 /// Version of the policy files' layout.
 pub const POLICY_FORMAT_VERSION: u32 = 1;
 
@@ -77,6 +83,10 @@ pub struct PolicyMeta {
     /// actions one after another; [`Policy::act`] returns the first, [`Policy::act_chunk`] all.
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub chunk: usize,
+    /// Temporal ensembling of the chunks when the policy acts in an env
+    /// ([`crate::bc::BcConfig::ensemble`], [`ChunkPlayer`]); `None`: chunks played open-loop.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ensemble: Option<f64>,
 }
 
 fn one() -> usize {
@@ -146,6 +156,7 @@ pub(crate) fn export_ppo(
         note: note.to_string(),
         discrete: None,
         chunk: 1,
+        ensemble: None,
     };
     write(dir, &meta, record_bytes(model.valid())?)
 }
@@ -180,6 +191,7 @@ pub(crate) fn export_sac(
         note: note.to_string(),
         discrete: None,
         chunk: 1,
+        ensemble: None,
     };
     write(dir, &meta, record_bytes(actor.valid())?)
 }
@@ -227,6 +239,14 @@ impl PolicyMeta {
                 "chunk = {} (algo {}): 1..={} actions, above 1 only for a continuous bc policy",
                 self.chunk, self.algo, MAX_CHUNK
             ));
+        }
+        if let Some(m) = self.ensemble {
+            if !(m.is_finite() && (0.0..=MAX_ENSEMBLE).contains(&m)) || self.chunk < 2 {
+                return Err(format!(
+                    "ensemble = {m} (chunk {}): a weight exponent in 0..={MAX_ENSEMBLE}, for chunk >= 2",
+                    self.chunk
+                ));
+            }
         }
         let mut params = 0usize;
         let mut width = self.obs_dim;

@@ -658,6 +658,14 @@ impl Policy {
         self.inner.meta().chunk
     }
 
+    /// The temporal-ensembling exponent of a chunked `bc` policy (`ensemble=M` at training),
+    /// or None: how `modesuite eval` and `run` play its chunks (`act` and `act_chunk` are
+    /// stateless and give the raw predictions).
+    #[getter]
+    fn ensemble(&self) -> Option<f64> {
+        self.inner.meta().ensemble
+    }
+
     /// The task id or scene file it was trained on.
     #[getter]
     fn target(&self) -> String {
