@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Makes the imitation table of docs/results.md, resumably (standard library only).
 
-    python3 scripts/imitation.py [--bin PATH] [--data data/il] [--only Spot-Uncover ...]
+    python3 scripts/imitation.py [--bin PATH] [--data data/il] [--only Spot-Uncover ...] [--methods bc ...]
     python3 scripts/imitation.py --table
 
 Per task: 30 demonstrations of the scripted expert with action noise 0.1 (seeds 1000-1029),
@@ -31,8 +31,11 @@ TASKS = ["Spot-Uncover", "Spot-Cover", "Spot-Curtain", "Franka-Uncover", "Franka
 # method name -> (train --algo, extra arguments); bc-chunk5: behaviour cloning with action chunks
 # of 5 (learning.md), added in session 26 after BC stalled on Cover
 METHODS = {"bc": ("bc", []), "retrieval": ("retrieval", ["--set", "k=1"]),
-           "bc-chunk5": ("bc", ["--set", "chunk=5"])}
-LABELS = {"bc": "BC", "retrieval": "Retrieval (k = 1)", "bc-chunk5": "BC, chunks of 5"}
+           "bc-chunk5": ("bc", ["--set", "chunk=5"]),
+           "bc-chunk5-ens": ("bc", ["--set", "chunk=5", "--set", "ensemble=0.01"])}
+# bc-chunk5-ens: the chunks played with ACT's temporal ensembling (learning.md), session 35
+LABELS = {"bc": "BC", "retrieval": "Retrieval (k = 1)", "bc-chunk5": "BC, chunks of 5",
+          "bc-chunk5-ens": "BC, chunks of 5, ensembled"}
 # the paper's (MoDeSuite, Table: imitation on Spot, DINOv2 features, 30 keyboard demonstrations)
 PAPER = {("Spot-Uncover", "bc"): 85, ("Spot-Cover", "bc"): 60, ("Spot-Curtain", "bc"): 60,
          ("Spot-Uncover", "retrieval"): 90, ("Spot-Cover", "retrieval"): 80, ("Spot-Curtain", "retrieval"): 80}
@@ -50,7 +53,7 @@ def run(cmd: list[str], log: Path) -> subprocess.CompletedProcess:
     return r
 
 
-def one_task(binary: str, root: Path, task: str, encoder: str) -> None:
+def one_task(binary: str, root: Path, task: str, encoder: str, methods: list[str]) -> None:
     target = f"MoDe-{task}-v0"
     data = root / task
     log = root / f"{task}.log"
@@ -61,7 +64,7 @@ def one_task(binary: str, root: Path, task: str, encoder: str) -> None:
     done = {(r["task"], r["method"], r["inputs"]) for r in read_lines(root / "results.jsonl")}
     variants = ["features+state"] + (["features"] if task.startswith("Spot") else [])
     for inputs in variants:
-        for method in METHODS:
+        for method in methods:
             if (task, method, inputs) not in done:
                 one_policy(binary, root, task, method, inputs, info, encoder, log)
 
@@ -101,6 +104,7 @@ def main() -> None:
     p.add_argument("--data", default="data/il", type=Path)
     p.add_argument("--encoder", default="pooled")
     p.add_argument("--only", nargs="*", help="tasks, e.g. Spot-Uncover")
+    p.add_argument("--methods", nargs="*", choices=list(METHODS), help="methods (default: all)")
     p.add_argument("--table", action="store_true")
     args = p.parse_args()
     if args.table:
@@ -108,7 +112,7 @@ def main() -> None:
         return
     args.data.mkdir(parents=True, exist_ok=True)
     for task in args.only or TASKS:
-        one_task(args.bin, args.data, task, args.encoder)
+        one_task(args.bin, args.data, task, args.encoder, args.methods or list(METHODS))
 
 
 if __name__ == "__main__":

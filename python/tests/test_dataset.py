@@ -141,3 +141,12 @@ def test_a_policy_of_action_chunks_from_the_dataset_in_python(
     assert np.array_equal(policy.act(obs), chunks[:, 0, :])
     assert policy.act_chunk(obs[2]).shape == (3, policy.act_dim)
     assert not np.array_equal(chunks[:, 0, :], chunks[:, 2, :])
+    assert policy.ensemble is None
+    # with ACT's temporal ensembling: the exponent is the policy's; act stays the raw first action
+    out = tmp_path / "bc3e"
+    cmd = [str(modesuite_bin), "train", TASK, "--algo", "bc", "--dataset", str(dataset),
+           "--out", str(out), "--set", "epochs=20", "--set", "chunk=3", "--set", "ensemble=0.01"]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    ens = modesuite.Policy(out)
+    assert (ens.chunk, ens.ensemble) == (3, 0.01)
+    assert np.array_equal(ens.act(obs), chunks[:, 0, :])  # same data, seed and network
