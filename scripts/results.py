@@ -2,6 +2,7 @@
 """Trains and evaluates the runs behind docs/results.md, resumably (standard library only).
 
     python3 scripts/results.py [--bin PATH] [--runs runs] [--only ppo/MoDe-Franka-Place-v0/0 ...]
+    python3 scripts/results.py --only ppo/MoDe-Franka-Lift-v0/0 --variant sep --set separate=true
 
 Each run (algorithm, task, seed) trains in chunks with `modesuite train` (the same command
 resumes it) and after each chunk its policy is evaluated with `modesuite eval` on 20 episodes
@@ -12,7 +13,10 @@ evaluation with every episode successful; the policy of its best evaluation so f
 `best_policy/` (with `eval.json`), since a later chunk can do worse (SAC especially). Killed at any moment, it continues where it was: a
 chunk already evaluated is not evaluated again, and training resumes from its checkpoint.
 `--table` prints the markdown table of all evaluations found, `--summary` one row per algorithm
-and task (seeds, best and last held-out success per seed).
+and task (seeds, best and last held-out success per seed). A hyper-parameter study names a
+variant: `--variant NAME --set KEY=VALUE ...` trains with those `train --set` values (give the
+same ones to resume it) into `runs/<algo>/<task>+NAME/seed<k>`, its ledger and rows labelled
+`<task>+NAME`.
 
 Every evaluation line is also appended to `docs/results/evals/<algo>-<task>-seed<k>.jsonl`, which
 is committed: `runs/` (checkpoints, metrics) stays on the machine that trained, the record of
@@ -75,9 +79,11 @@ def append_line(path: Path, obj: dict) -> None:
         os.fsync(f.fileno())
 
 
-def one_run(binary: str, root: Path, algo: str, task: str, seed: int) -> None:
+def one_run(binary: str, root: Path, algo: str, task: str, seed: int,
+            variant: str | None = None, sets: list[str] | None = None) -> None:
     chunk, budget = ALGOS[algo]
-    d = run_dir(root, algo, task, seed)
+    label = f"{task}+{variant}" if variant else task
+    d = run_dir(root, algo, label, seed)
     d.mkdir(parents=True, exist_ok=True)
     evals = d / "evals.jsonl"
     done = {e["env_steps"] for e in read_lines(evals)}
@@ -88,6 +94,8 @@ def one_run(binary: str, root: Path, algo: str, task: str, seed: int) -> None:
             continue
         cmd = [binary, "train", task, "--algo", algo, "--seed", str(seed),
                "--env-steps", str(target), "--out", str(d)]
+        for kv in sets or []:
+            cmd += ["--set", kv]
         with open(d / "train.log", "a") as log:
             r = subprocess.run(cmd, stdout=log, stderr=log)
         if r.returncode != 0:
@@ -105,8 +113,8 @@ def one_run(binary: str, root: Path, algo: str, task: str, seed: int) -> None:
                 "mean_length": summary["mean_length"], "errors": summary["errors"]}
         best = max((e["success_rate"] or 0 for e in read_lines(evals)), default=-1.0)
         append_line(evals, line)
-        ledger_path(algo, task, seed).parent.mkdir(parents=True, exist_ok=True)
-        append_line(ledger_path(algo, task, seed), line)
+        ledger_path(algo, label, seed).parent.mkdir(parents=True, exist_ok=True)
+        append_line(ledger_path(algo, label, seed), line)
         if (summary["success_rate"] or 0) > best or not (d / "best_policy").is_dir():
             # keep the policy of the best evaluation: SAC in particular can fall back later
             shutil.rmtree(d / "best_policy.tmp", ignore_errors=True)
@@ -114,7 +122,7 @@ def one_run(binary: str, root: Path, algo: str, task: str, seed: int) -> None:
             (d / "best_policy.tmp" / "eval.json").write_text(json.dumps(line) + "\n")
             shutil.rmtree(d / "best_policy", ignore_errors=True)
             os.rename(d / "best_policy.tmp", d / "best_policy")
-        print(f"{algo} {task} seed {seed}: {line}", flush=True)
+        print(f"{algo} {label} seed {seed}: {line}", flush=True)
         if summary["success_rate"] == 1.0:
             return
 
@@ -171,6 +179,9 @@ def main() -> None:
     p.add_argument("--bin", default=os.path.expanduser("~/.cache/modesuite-target/release/modesuite"))
     p.add_argument("--runs", default="runs", type=Path)
     p.add_argument("--only", nargs="*", help="algo/task/seed, e.g. ppo/MoDe-Franka-Place-v0/0")
+    p.add_argument("--variant", help="a hyper-parameter study's name (runs and ledgers <task>+NAME)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="`train --set` value of the variant (repeatable; needs --variant)")
     p.add_argument("--table", action="store_true")
     p.add_argument("--summary", action="store_true",
                    help="one row per algorithm and task from docs/results/evals/")
@@ -181,6 +192,10 @@ def main() -> None:
     if args.summary:
         print(summary())
         return
+    if args.set and not args.variant:
+        p.error("--set needs --variant NAME (the runs of other settings go elsewhere)")
+    if args.variant and (not args.only or not args.variant.replace("-", "").replace("_", "").isalnum()):
+        p.error(f"--variant {args.variant}: letters, digits, - and _, with --only")
     plan = PLAN
     if args.only:
         # any run, in the order given (more seeds than the plan's, say)
@@ -192,7 +207,7 @@ def main() -> None:
                         "e.g. ppo/MoDe-Franka-Place-v0/0")
             plan.append((parts[0], parts[1], int(parts[2])))
     for algo, task, seed in plan:
-        one_run(args.bin, args.runs, algo, task, seed)
+        one_run(args.bin, args.runs, algo, task, seed, args.variant, args.set)
 
 
 if __name__ == "__main__":
