@@ -10,20 +10,23 @@
 //! With a `horizon` H > 1 (and `k = 1`), the matched demonstration's actions are replayed: the
 //! policy takes the matched frame's action and the next H - 1 actions of the same
 //! demonstration (fewer at its end) before it looks again, as DeMoBot replays a retrieved
-//! segment; between two looks it neither observes nor renders.
+//! segment; between two looks it neither observes nor renders. With an `ensemble` exponent it
+//! looks at every step instead and plays the weighted mean of the segments retrieved for that
+//! step (ACT's temporal ensembling, `modesuite_learn::policy::ChunkPlayer`).
 //!
 //! A retrieval policy is a folder like a trained one: `policy.json` (`algo: "retrieval"`,
-//! sizes, `k`, `horizon`, the demonstrations' `episode_ends`, the note with target and action
-//! modes) and `retrieval.bin` (little-endian f32: the scales, the scaled observations, the
+//! sizes, `k`, `horizon`, `ensemble` when set, the demonstrations' `episode_ends`, the note
+//! with target and action modes) and `retrieval.bin` (little-endian f32: the scales, the scaled observations, the
 //! actions).
 
 use std::path::Path;
 
+use modesuite_learn::policy::ChunkPlayer;
 use serde_json::json;
 
-/// Version of the retrieval folder's layout (2 added `horizon` and `episode_ends`; version 1
-/// folders still load, as horizon 1).
-pub const RETRIEVAL_FORMAT_VERSION: u64 = 2;
+/// Version of the retrieval folder's layout (2 added `horizon` and `episode_ends`, 3 the
+/// optional `ensemble`; version 1 folders still load, as horizon 1, and version 2 ones).
+pub const RETRIEVAL_FORMAT_VERSION: u64 = 3;
 /// Largest number of frames a retrieval policy may declare (a damaged file must not make
 /// loading allocate without bound).
 const MAX_FRAMES: usize = 1 << 24;
@@ -35,6 +38,8 @@ pub struct Retrieval {
     act_dim: usize,
     k: usize,
     horizon: usize,
+    /// Temporal ensembling of the replayed segments (`horizon` >= 2), see the module.
+    ensemble: Option<f64>,
     /// One past the last frame of each demonstration, ascending (the last is `len()`).
     episode_ends: Vec<usize>,
     scale: Vec<f32>,
@@ -66,6 +71,7 @@ impl Retrieval {
             act_dim,
             k: k.max(1),
             horizon: 1,
+            ensemble: None,
             episode_ends: vec![n],
             scale,
             obs: scaled,
@@ -95,9 +101,30 @@ impl Retrieval {
         Ok(self)
     }
 
+    /// Looks at every step and ensembles the segments retrieved (exponent `m`, see
+    /// `BcConfig::ensemble`); needs `horizon >= 2` (call after [`Retrieval::with_replay`]).
+    pub fn with_ensemble(mut self, m: Option<f64>) -> Result<Self, String> {
+        if let Some(m) = m {
+            let max = modesuite_learn::policy::MAX_ENSEMBLE;
+            if !(m.is_finite() && (0.0..=max).contains(&m)) || self.horizon < 2 {
+                return Err(format!(
+                    "ensemble = {m} (horizon {}): a weight exponent in 0..={max}, for horizon >= 2",
+                    self.horizon
+                ));
+            }
+        }
+        self.ensemble = m;
+        Ok(self)
+    }
+
     /// Actions replayed per look.
     pub fn horizon(&self) -> usize {
         self.horizon
+    }
+
+    /// The temporal-ensembling exponent, if any.
+    pub fn ensemble(&self) -> Option<f64> {
+        self.ensemble
     }
 
     /// The frame after `frame` in its demonstration, if any.
@@ -188,10 +215,13 @@ impl Retrieval {
         let bin = dir.join("retrieval.bin");
         modesuite_engine::fsio::write_atomic(&bin, &bytes)
             .map_err(|e| format!("{}: {e}", bin.display()))?;
-        let meta = json!({"format_version": RETRIEVAL_FORMAT_VERSION, "algo": "retrieval",
+        let mut meta = json!({"format_version": RETRIEVAL_FORMAT_VERSION, "algo": "retrieval",
                           "obs_dim": self.obs_dim, "act_dim": self.act_dim, "k": self.k,
                           "horizon": self.horizon, "episode_ends": self.episode_ends,
                           "frames": self.len(), "note": note});
+        if let Some(m) = self.ensemble {
+            meta["ensemble"] = json!(m);
+        }
         let path = dir.join("policy.json");
         let text = serde_json::to_string_pretty(&meta).map_err(|e| e.to_string())?;
         modesuite_engine::fsio::write_atomic(&path, text.as_bytes())
@@ -218,9 +248,9 @@ impl Retrieval {
             field("frames")?,
         );
         let version = meta["format_version"].as_u64();
-        if !matches!(version, Some(1) | Some(RETRIEVAL_FORMAT_VERSION)) {
+        if !matches!(version, Some(1..=RETRIEVAL_FORMAT_VERSION)) {
             return Err(format!(
-                "{}: format_version: this build reads 1 and {RETRIEVAL_FORMAT_VERSION}",
+                "{}: format_version: this build reads 1 to {RETRIEVAL_FORMAT_VERSION}",
                 path.display()
             ));
         }
@@ -259,6 +289,7 @@ impl Retrieval {
             act_dim: ad,
             k,
             horizon: 1,
+            ensemble: None,
             episode_ends: vec![n],
             scale: v[..od].to_vec(),
             obs: v[od..od + n * od].to_vec(),
@@ -274,8 +305,16 @@ impl Retrieval {
                 .collect()
         });
         let ends = ends.ok_or_else(|| format!("{}: episode_ends is missing", path.display()))?;
+        let ensemble = match &meta["ensemble"] {
+            serde_json::Value::Null => None,
+            v => Some(
+                v.as_f64()
+                    .ok_or_else(|| format!("{}: ensemble = {v}: a number", path.display()))?,
+            ),
+        };
         loaded
             .with_replay(horizon, ends)
+            .and_then(|r| r.with_ensemble(ensemble))
             .map_err(|e| format!("{}: {e}", path.display()))
     }
 }
@@ -286,24 +325,21 @@ pub struct RetrievalPolicy {
     pub r: Retrieval,
     /// What it observes.
     pub inputs: crate::inputs::Observer,
-    /// The frame being replayed and how many more actions of its demonstration to replay.
-    replay: Option<(usize, usize)>,
+    /// The retrieved actions still to play (open-loop, or ensembled).
+    player: ChunkPlayer,
 }
 
 impl RetrievalPolicy {
     /// The policy of `r` observing `inputs`.
     pub fn new(r: Retrieval, inputs: crate::inputs::Observer) -> Self {
-        Self {
-            r,
-            inputs,
-            replay: None,
-        }
+        let player = ChunkPlayer::new(r.act_dim(), r.horizon(), r.ensemble());
+        Self { r, inputs, player }
     }
 }
 
 impl modesuite_tasks::expert::Policy for RetrievalPolicy {
     fn reset(&mut self, _seed: u64) {
-        self.replay = None;
+        self.player.reset();
     }
 
     fn act(
@@ -312,15 +348,11 @@ impl modesuite_tasks::expert::Policy for RetrievalPolicy {
         action: &mut [f32],
     ) -> Result<(), String> {
         // replaying the matched demonstration: its next action, without looking
-        if let Some((frame, left)) = self.replay {
-            if let Some(next) = self.r.next_in_demo(frame).filter(|_| left > 0) {
-                self.replay = Some((next, left - 1));
-                action.copy_from_slice(self.r.action_of(next));
-                return Ok(());
-            }
+        if !self.player.needs_chunk() {
+            self.player.play(None, action);
+            return Ok(());
         }
-        let r = &self.r;
-        let mut matched = None;
+        let (r, player) = (&self.r, &mut self.player);
         crate::learning::act_on_inputs(
             &mut self.inputs,
             env,
@@ -328,15 +360,24 @@ impl modesuite_tasks::expert::Policy for RetrievalPolicy {
             r.obs_dim(),
             r.act_dim(),
             |o| {
-                let (a, m) = r.act_matched(o);
-                matched = m;
+                // the matched frame's action and the next ones of its demonstration (fewer at
+                // its end), or the k frames' mean alone
+                let (mut segment, matched) = r.act_matched(o);
+                let mut frame = matched.filter(|_| r.horizon() > 1);
+                for _ in 1..r.horizon() {
+                    match frame.and_then(|f| r.next_in_demo(f)) {
+                        Some(next) => {
+                            segment.extend_from_slice(r.action_of(next));
+                            frame = Some(next);
+                        }
+                        None => break,
+                    }
+                }
+                let mut a = vec![0.0; r.act_dim()];
+                player.play(Some(&segment), &mut a);
                 a
             },
-        )?;
-        self.replay = matched
-            .filter(|_| r.horizon() > 1)
-            .map(|i| (i, r.horizon() - 1));
-        Ok(())
+        )
     }
 }
 

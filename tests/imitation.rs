@@ -31,6 +31,11 @@ const TASK: &str = "MoDe-Franka-Place-v0";
 /// Behaviour cloning of Franka Place on `data` into `out` (seed 1, 1,500 epochs), with `extra`
 /// arguments.
 fn train(data: &Path, out: &Path, extra: &[&str]) -> String {
+    ok(train_cmd(data, out, extra))
+}
+
+/// [`train`]'s command, its output unchecked.
+fn train_cmd(data: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec![
         "train",
         TASK,
@@ -46,7 +51,26 @@ fn train(data: &Path, out: &Path, extra: &[&str]) -> String {
         "epochs=1500",
     ];
     args.extend_from_slice(extra);
+    cli(&args)
+}
+
+/// `modesuite run TASK --policy DIR` with `extra` arguments: its output.
+fn run_policy(dir: &Path, extra: &[&str]) -> String {
+    let mut args = vec!["run", TASK, "--policy", dir.to_str().unwrap()];
+    args.extend_from_slice(extra);
     ok(cli(&args))
+}
+
+/// Runs the policy folder `dir` on `TASK` from seed 7 (the demonstration's) and checks that
+/// the episode succeeds.
+fn succeeds_from_seed_7(dir: &Path, label: &str) {
+    let run = run_policy(dir, &["--seed", "7", "--json"]);
+    let summary: serde_json::Value = serde_json::from_str(run.lines().last().unwrap()).unwrap();
+    println!(
+        "{label} from the demonstration's seed: {}",
+        run.lines().next().unwrap()
+    );
+    assert_eq!(summary["success_rate"], 1.0, "{run}");
 }
 
 /// Trains a retrieval policy of `task` on `data` into `out` with `extra` arguments and runs it
@@ -94,35 +118,13 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     let a = scratch("a");
     let log = train(&data, &a, &[]);
     println!("{log}");
-    let run = ok(cli(&[
-        "run",
-        TASK,
-        "--policy",
-        a.to_str().unwrap(),
-        "--seed",
-        "7",
-        "--json",
-    ]));
-    let summary: serde_json::Value = serde_json::from_str(run.lines().last().unwrap()).unwrap();
-    let episode: serde_json::Value = serde_json::from_str(run.lines().next().unwrap()).unwrap();
-    println!("BC policy from the demonstration's seed: {episode}");
-    assert_eq!(summary["success_rate"], 1.0, "{run}");
+    succeeds_from_seed_7(&a, "BC policy");
     // the same seed trains the same weights
     let b = scratch("b");
     train(&data, &b, &[]);
     // (compared by what they do: weight files hold burn's random parameter ids)
     let returns = |dir: &Path| -> Vec<String> {
-        let run = ok(cli(&[
-            "run",
-            TASK,
-            "--policy",
-            dir.to_str().unwrap(),
-            "--seed",
-            "8",
-            "--episodes",
-            "2",
-            "--json",
-        ]));
+        let run = run_policy(dir, &["--seed", "8", "--episodes", "2", "--json"]);
         run.lines()
             .map(|l| {
                 let v: serde_json::Value = serde_json::from_str(l).unwrap();
@@ -161,46 +163,38 @@ fn bc_overfits_one_demonstration_and_replays_it() {
     let (_, chunked) = retrieval_run(TASK, &data, &h, &["--set", "horizon=5"], "7");
     println!("retrieval with horizon 5: {chunked}");
     assert_eq!(chunked["return"], recorded["return"]);
-    // BC with action chunks (5 actions per look, played before the next look) overfits it too
-    let c = scratch("c");
-    train(&data, &c, &["--set", "chunk=5"]);
-    let co = c.to_str().unwrap();
-    let run = ok(cli(&["run", TASK, "--policy", co, "--seed", "7", "--json"]));
-    let summary: serde_json::Value = serde_json::from_str(run.lines().last().unwrap()).unwrap();
-    println!(
-        "BC with chunks of 5 from the demonstration's seed: {}",
-        run.lines().next().unwrap()
-    );
-    assert_eq!(summary["success_rate"], 1.0, "{run}");
-    // and acting with ACT's temporal ensembling (observing every step, the chunks' predictions
-    // for each step averaged) too
-    let e = scratch("e");
-    train(&data, &e, &["--set", "chunk=5", "--set", "ensemble=0.01"]);
-    let eo = e.to_str().unwrap();
-    let run = ok(cli(&["run", TASK, "--policy", eo, "--seed", "7", "--json"]));
-    let summary: serde_json::Value = serde_json::from_str(run.lines().last().unwrap()).unwrap();
-    println!(
-        "BC with chunks of 5, ensembled, from the demonstration's seed: {}",
-        run.lines().next().unwrap()
-    );
-    assert_eq!(summary["success_rate"], 1.0, "{run}");
-    // an ensemble without chunks is refused, naming the field
-    let o = cli(&[
-        "train",
+    // and looking at every step, the segments retrieved for each step ensembled: still exact
+    let he = scratch("he");
+    let (_, ens) = retrieval_run(
         TASK,
-        "--algo",
-        "bc",
-        "--dataset",
-        data.to_str().unwrap(),
-        "--out",
-        eo,
-        "--set",
-        "ensemble=0.01",
-    ]);
+        &data,
+        &he,
+        &["--set", "horizon=5", "--set", "ensemble=0.01"],
+        "7",
+    );
+    println!("retrieval with horizon 5, ensembled: {ens}");
+    assert_eq!(ens["return"], recorded["return"]);
+    // BC with action chunks (5 actions per look, played before the next look) overfits it too,
+    // and so it does acting with ACT's temporal ensembling (observing every step, the chunks'
+    // predictions for each step averaged)
+    let (c, e) = (scratch("c"), scratch("e"));
+    for (dir, set, label) in [
+        (&c, &["--set", "chunk=5"][..], "BC with chunks of 5"),
+        (
+            &e,
+            &["--set", "chunk=5", "--set", "ensemble=0.01"][..],
+            "BC with chunks of 5, ensembled,",
+        ),
+    ] {
+        train(&data, dir, set);
+        succeeds_from_seed_7(dir, label);
+    }
+    // an ensemble without chunks is refused, naming the field
+    let o = train_cmd(&data, &e, &["--set", "ensemble=0.01"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("ensemble = 0.01 (chunk 1)"), "{err}");
-    for d in [data, a, b, r, h, c, e] {
+    for d in [data, a, b, r, h, he, c, e] {
         let _ = std::fs::remove_dir_all(d);
     }
 }

@@ -39,9 +39,10 @@ impl ChunkPlayer {
         self.ensemble.is_some() || self.pending.is_empty()
     }
 
-    /// Writes this step's action into `action`; `chunk` (its `chunk x act_dim` actions,
-    /// predicted from this step's observation) must be given when [`ChunkPlayer::needs_chunk`]
-    /// says so and is ignored otherwise.
+    /// Writes this step's action into `action`; `chunk` (up to `chunk` actions of `act_dim`
+    /// values, at least one, predicted from this step's observation: a shorter one, such as a
+    /// demonstration's last frames, plays fewer steps open-loop and predicts fewer ahead) must
+    /// be given when [`ChunkPlayer::needs_chunk`] says so and is ignored otherwise.
     ///
     /// # Panics
     /// If a chunk is needed and missing or has the wrong length (a caller's bug).
@@ -50,7 +51,12 @@ impl ChunkPlayer {
         assert_eq!(action.len(), ad, "ChunkPlayer::play: action length");
         if self.needs_chunk() {
             let c = chunk.expect("ChunkPlayer::play: this step needs a chunk");
-            assert_eq!(c.len(), ad * self.chunk, "ChunkPlayer::play: chunk length");
+            assert!(
+                !c.is_empty() && c.len().is_multiple_of(ad) && c.len() <= ad * self.chunk,
+                "ChunkPlayer::play: chunk length {} (act_dim {ad}, chunk {})",
+                c.len(),
+                self.chunk
+            );
             match self.ensemble {
                 None => self.pending.extend(
                     c.chunks_exact(ad)
@@ -120,5 +126,11 @@ mod tests {
         let mut a = [0.0f32];
         ens.play(Some(&chunk_at(7)), &mut a);
         assert_eq!(a[0], 70.0, "a reset forgets the pending predictions");
+        // a shorter chunk (a demonstration's end): open-loop plays it and looks again
+        let mut open = ChunkPlayer::new(1, 3, None);
+        open.play(Some(&[5.0, 6.0]), &mut a);
+        assert!(!open.needs_chunk() && a[0] == 5.0);
+        open.play(None, &mut a);
+        assert!(open.needs_chunk() && a[0] == 6.0);
     }
 }

@@ -241,7 +241,8 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
 }
 
 /// `train --algo retrieval`: every demonstration frame kept; `--set k=N` neighbours (default
-/// 1), `--set horizon=H` actions of the matched demonstration replayed per look (default 1).
+/// 1), `--set horizon=H` actions of the matched demonstration replayed per look (default 1),
+/// `--set ensemble=M` those segments retrieved at every step and ensembled (horizon >= 2).
 fn retrieval(
     args: &TrainArgs,
     demos: &Demos,
@@ -253,18 +254,25 @@ fn retrieval(
 ) -> Result<(), CliError> {
     if args.config.is_some() {
         return Err(CliError::input(
-            "--config: retrieval's settings are --set k=N and --set horizon=H",
+            "--config: retrieval's settings are --set k=N, horizon=H and ensemble=M",
         ));
     }
-    let (mut k, mut horizon) = (1usize, 1usize);
+    let (mut k, mut horizon, mut ensemble) = (1usize, 1usize, None);
     for kv in &args.set {
         let (key, v) = kv.split_once('=').unwrap_or((kv, ""));
         let slot = match key {
             "k" => &mut k,
             "horizon" => &mut horizon,
+            "ensemble" => {
+                let m: f64 = v.trim().parse().map_err(|_| {
+                    CliError::input(format!("--set {kv}: ensemble is a number (ACT's 0.01)"))
+                })?;
+                ensemble = Some(m);
+                continue;
+            }
             _ => {
                 return Err(CliError::input(format!(
-                    "--set {kv}: retrieval's settings are k=N and horizon=H"
+                    "--set {kv}: retrieval's settings are k=N, horizon=H and ensemble=M"
                 )))
             }
         };
@@ -281,15 +289,17 @@ fn retrieval(
     let r =
         crate::retrieval::Retrieval::new(&demos.obs, &demos.act, demos.obs_dim, demos.act_dim, k)
             .with_replay(horizon, used.ends.clone())
+            .and_then(|r| r.with_ensemble(ensemble))
             .map_err(|e| CliError::input(format!("--set: {e}")))?;
     r.save(policy_dir, note).map_err(CliError::runtime)?;
     writeln!(
         out,
-        "retrieval {} ({}): {} frames of {} episodes, k = {k}, horizon {horizon}; policy {}",
+        "retrieval {} ({}): {} frames of {} episodes, k = {k}, horizon {horizon}{}; policy {}",
         args.target,
         inputs,
         r.len(),
         used.episodes,
+        ensemble.map_or(String::new(), |m| format!(", ensembled ({m})")),
         policy_dir.display()
     )
     .map_err(io)
