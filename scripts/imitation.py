@@ -32,10 +32,13 @@ TASKS = ["Spot-Uncover", "Spot-Cover", "Spot-Curtain", "Franka-Uncover", "Franka
 # of 5 (learning.md), added in session 26 after BC stalled on Cover
 METHODS = {"bc": ("bc", []), "retrieval": ("retrieval", ["--set", "k=1"]),
            "bc-chunk5": ("bc", ["--set", "chunk=5"]),
-           "bc-chunk5-ens": ("bc", ["--set", "chunk=5", "--set", "ensemble=0.01"])}
-# bc-chunk5-ens: the chunks played with ACT's temporal ensembling (learning.md), session 35
+           "bc-chunk5-ens": ("bc", ["--set", "chunk=5", "--set", "ensemble=0.01"]),
+           "retrieval-h10-ens": ("retrieval", ["--set", "horizon=10", "--set", "ensemble=0.01"])}
+# bc-chunk5-ens: the chunks played with ACT's temporal ensembling (learning.md), session 35;
+# retrieval-h10-ens: segments of 10 retrieved at every step and ensembled the same way
 LABELS = {"bc": "BC", "retrieval": "Retrieval (k = 1)", "bc-chunk5": "BC, chunks of 5",
-          "bc-chunk5-ens": "BC, chunks of 5, ensembled"}
+          "bc-chunk5-ens": "BC, chunks of 5, ensembled",
+          "retrieval-h10-ens": "Retrieval, segments of 10, ensembled"}
 # the paper's (MoDeSuite, Table: imitation on Spot, DINOv2 features, 30 keyboard demonstrations)
 PAPER = {("Spot-Uncover", "bc"): 85, ("Spot-Cover", "bc"): 60, ("Spot-Curtain", "bc"): 60,
          ("Spot-Uncover", "retrieval"): 90, ("Spot-Cover", "retrieval"): 80, ("Spot-Curtain", "retrieval"): 80}
