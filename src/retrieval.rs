@@ -16,8 +16,8 @@
 //!
 //! A retrieval policy is a folder like a trained one: `policy.json` (`algo: "retrieval"`,
 //! sizes, `k`, `horizon`, `ensemble` when set, the demonstrations' `episode_ends`, the note
-//! with target and action modes) and `retrieval.bin` (little-endian f32: the scales, the scaled observations, the
-//! actions).
+//! with target and action modes) and `retrieval.bin` (little-endian f32: the scales, the
+//! scaled observations, the actions).
 
 use std::path::Path;
 
