@@ -19,7 +19,7 @@ if not any(k in os.environ for k in ("XDG_RUNTIME_DIR", "NODEVICE_SELECT", "MESA
     os.environ["NODEVICE_SELECT"] = "1"
 
 from . import _core  # noqa: E402
-from ._core import Encoder, Policy, SceneError  # noqa: E402
+from ._core import Encoder, Policy, PolicyPlayer, SceneError  # noqa: E402
 from .envs import OBS_MODES, ModeSuiteEnv, ModeSuiteVectorEnv  # noqa: E402
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "ModeSuiteVectorEnv",
     "OBS_MODES",
     "Policy",
+    "PolicyPlayer",
     "SceneError",
     "TASK_IDS",
     "make_env",

@@ -84,6 +84,14 @@ class Policy:
     @property
     def act_dim(self) -> int: ...
 
+class PolicyPlayer:
+    """A policy acting in one environment, one observation per step, as `modesuite eval` plays
+    it (action chunks open-loop, or temporally ensembled when the policy says so)."""
+
+    def __init__(self, policy: Policy) -> None: ...
+    def reset(self) -> None: ...
+    def act(self, obs: npt.ArrayLike) -> npt.NDArray[np.float32]: ...
+
 class Encoder:
     """An image encoder: `Encoder("pooled")` or `Encoder("dinov2", weights="model.safetensors")`."""
 

@@ -611,6 +611,57 @@ impl Policy {
     }
 }
 
+/// A policy acting in one environment, one observation per step, as `modesuite eval` plays it:
+/// a policy of action chunks plays each chunk open-loop before it observes again, or, trained
+/// with `ensemble=M`, observes every step and plays ACT's temporal ensemble of its chunks.
+/// `reset()` at each episode's start.
+#[pyclass(module = "modesuite._core")]
+pub struct PolicyPlayer {
+    policy: Py<Policy>,
+    player: modesuite::learn::policy::ChunkPlayer,
+}
+
+#[pymethods]
+impl PolicyPlayer {
+    /// A player of `policy` (a `modesuite.Policy`).
+    #[new]
+    fn new(py: Python<'_>, policy: Py<Policy>) -> Self {
+        let m = policy.borrow(py).inner.meta().clone();
+        Self {
+            policy,
+            player: modesuite::learn::policy::ChunkPlayer::new(m.act_dim, m.chunk, m.ensemble),
+        }
+    }
+
+    /// Forgets the actions still pending (a new episode).
+    fn reset(&mut self) {
+        self.player.reset();
+    }
+
+    /// The action (float32, `(act_dim,)`) for this step's observation `(obs_dim,)`; between
+    /// two looks of an open-loop chunk the observation is not used.
+    fn act<'py>(&mut self, py: Python<'py>, obs: &Bound<'py, PyAny>) -> PyResult<Py<PyAny>> {
+        let policy = self.policy.borrow(py);
+        let (rows, obs) = policy.observations(obs)?;
+        if rows.is_some() {
+            return Err(PyValueError::new_err(
+                "PolicyPlayer.act takes one observation (obs_dim,): it keeps one episode's chunks",
+            ));
+        }
+        let ad = policy.inner.act_dim();
+        let mut action = vec![0.0f32; ad];
+        if self.player.needs_chunk() {
+            let data = obs.as_slice()?;
+            let inner: &modesuite::learn::Policy = &policy.inner;
+            let chunk = py.detach(|| inner.act_chunk(data));
+            self.player.play(Some(&chunk), &mut action);
+        } else {
+            self.player.play(None, &mut action);
+        }
+        convert::array(py, action, &[ad])
+    }
+}
+
 #[pymethods]
 impl Policy {
     /// Loads the policy of a run folder or policy folder.
@@ -722,6 +773,7 @@ fn _panic_for_test(message: &str) -> PyResult<()> {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Core>()?;
     m.add_class::<Policy>()?;
+    m.add_class::<PolicyPlayer>()?;
     m.add_class::<encoder::Encoder>()?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add_function(wrap_pyfunction!(task_ids, m)?)?;

@@ -150,3 +150,18 @@ def test_a_policy_of_action_chunks_from_the_dataset_in_python(
     ens = modesuite.Policy(out)
     assert (ens.chunk, ens.ensemble) == (3, 0.01)
     assert np.array_equal(ens.act(obs), chunks[:, 0, :])  # same data, seed and network
+    # played one step at a time as `modesuite eval` plays them: open-loop chunks ignore the
+    # observations between looks; ensembled ones average every chunk's prediction for the step
+    player = modesuite.PolicyPlayer(policy)
+    played = [player.act(obs[t]) for t in range(4)]
+    assert np.array_equal(np.stack(played[:3]), chunks[0]) and np.array_equal(played[3], chunks[3, 0])
+    player.reset()
+    assert np.array_equal(player.act(obs[1]), chunks[1, 0])
+    eplayer = modesuite.PolicyPlayer(ens)
+    first, second = eplayer.act(obs[0]), eplayer.act(obs[1])
+    assert np.array_equal(first, chunks[0, 0])
+    w = np.exp(0.01)  # the prediction made one step earlier weighs exp(M * 1)
+    want = (w * chunks[0, 1].astype(np.float64) + chunks[1, 0]) / (w + 1.0)
+    assert np.allclose(second, want, rtol=1e-6, atol=1e-7), (second, want)
+    with pytest.raises(ValueError, match="one observation"):
+        eplayer.act(obs)
