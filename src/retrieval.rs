@@ -104,15 +104,7 @@ impl Retrieval {
     /// Looks at every step and ensembles the segments retrieved (exponent `m`, see
     /// `BcConfig::ensemble`); needs `horizon >= 2` (call after [`Retrieval::with_replay`]).
     pub fn with_ensemble(mut self, m: Option<f64>) -> Result<Self, String> {
-        if let Some(m) = m {
-            let max = modesuite_learn::policy::MAX_ENSEMBLE;
-            if !(m.is_finite() && (0.0..=max).contains(&m)) || self.horizon < 2 {
-                return Err(format!(
-                    "ensemble = {m} (horizon {}): a weight exponent in 0..={max}, for horizon >= 2",
-                    self.horizon
-                ));
-            }
-        }
+        modesuite_learn::policy::check_ensemble(m, self.horizon, "horizon")?;
         self.ensemble = m;
         Ok(self)
     }

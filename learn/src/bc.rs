@@ -98,15 +98,8 @@ impl BcConfig {
         if !(1..=MAX_CHUNK).contains(&self.chunk) {
             return bad(format!("chunk = {}: 1..={MAX_CHUNK} actions", self.chunk));
         }
-        if let Some(m) = self.ensemble {
-            if !(m.is_finite() && (0.0..=MAX_ENSEMBLE).contains(&m)) || self.chunk < 2 {
-                return bad(format!(
-                    "ensemble = {m} (chunk {}): a weight exponent in 0..={MAX_ENSEMBLE}, for chunk >= 2",
-                    self.chunk
-                ));
-            }
-        }
-        Ok(())
+        crate::chunks::check_ensemble(self.ensemble, self.chunk, "chunk")
+            .map_err(LearnError::Config)
     }
 }
 

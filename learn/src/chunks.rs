@@ -79,12 +79,35 @@ impl ChunkPlayer {
                 }
             }
         }
-        let (sum, weight) = self.pending.pop_front().expect("filled above");
+        let (mut sum, weight) = self.pending.pop_front().expect("filled above");
         for (o, s) in action.iter_mut().zip(&sum) {
             *o = (s / weight) as f32;
         }
+        if self.ensemble.is_some() {
+            // the slot comes back empty for the step a chunk ahead: no allocation per step
+            sum.fill(0.0);
+            self.pending.push_back((sum, 0.0));
+        }
     }
 }
+
+/// Checks a temporal-ensembling exponent (`BcConfig::ensemble`, `PolicyMeta::ensemble`, a
+/// retrieval policy's): finite, in `0..=`[`MAX_ENSEMBLE`], and only for chunks of `chunk >= 2`
+/// actions; `name` is what the chunk is called there (`chunk`, `horizon`).
+pub fn check_ensemble(ensemble: Option<f64>, chunk: usize, name: &str) -> Result<(), String> {
+    match ensemble {
+        Some(m) if !(m.is_finite() && (0.0..=MAX_ENSEMBLE).contains(&m)) || chunk < 2 => {
+            Err(format!(
+                "ensemble = {m} ({name} {chunk}): a weight exponent in 0..={MAX_ENSEMBLE}, for {name} >= 2"
+            ))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Largest temporal-ensembling exponent: the oldest of [`crate::policy::MAX_CHUNK`]
+/// predictions then weighs `exp(5 * 99)`, still a finite `f64`.
+pub const MAX_ENSEMBLE: f64 = 5.0;
 
 #[cfg(test)]
 mod tests {

@@ -20,11 +20,7 @@ use crate::LearnError;
 /// Largest action chunk of a policy ([`crate::bc::BcConfig::chunk`]).
 pub const MAX_CHUNK: usize = 100;
 
-/// Largest temporal-ensembling exponent ([`crate::bc::BcConfig::ensemble`]): the oldest of
-/// [`MAX_CHUNK`] predictions then weighs `exp(5 * 99)`, still a finite `f64`.
-pub const MAX_ENSEMBLE: f64 = 5.0;
-
-pub use crate::chunks::ChunkPlayer;
+pub use crate::chunks::{check_ensemble, ChunkPlayer, MAX_ENSEMBLE};
 
 /// Version of the policy files' layout.
 pub const POLICY_FORMAT_VERSION: u32 = 1;
@@ -240,14 +236,7 @@ impl PolicyMeta {
                 self.chunk, self.algo, MAX_CHUNK
             ));
         }
-        if let Some(m) = self.ensemble {
-            if !(m.is_finite() && (0.0..=MAX_ENSEMBLE).contains(&m)) || self.chunk < 2 {
-                return Err(format!(
-                    "ensemble = {m} (chunk {}): a weight exponent in 0..={MAX_ENSEMBLE}, for chunk >= 2",
-                    self.chunk
-                ));
-            }
-        }
+        check_ensemble(self.ensemble, self.chunk, "chunk")?;
         let mut params = 0usize;
         let mut width = self.obs_dim;
         for &h in self.hidden.iter().chain([&self.net_outputs()]) {

@@ -626,11 +626,12 @@ impl PolicyPlayer {
     /// A player of `policy` (a `modesuite.Policy`).
     #[new]
     fn new(py: Python<'_>, policy: Py<Policy>) -> Self {
-        let m = policy.borrow(py).inner.meta().clone();
-        Self {
-            policy,
-            player: modesuite::learn::policy::ChunkPlayer::new(m.act_dim, m.chunk, m.ensemble),
-        }
+        let player = {
+            let m = policy.borrow(py);
+            let m = m.inner.meta();
+            modesuite::learn::policy::ChunkPlayer::new(m.act_dim, m.chunk, m.ensemble)
+        };
+        Self { policy, player }
     }
 
     /// Forgets the actions still pending (a new episode).
