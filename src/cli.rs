@@ -111,7 +111,7 @@ pub enum Command {
     /// Step the 16 tasks with random actions for a long time, sampling resident memory (a
     /// leak check); exit 1 if memory grew beyond the limit after the warm-up.
     Soak(soak::SoakArgs),
-    /// Run a benchmark suite: engine, fem, pbd, contact, robots, render, tasks.
+    /// Run a benchmark suite: engine, fem, pbd, contact, robots, render, tasks, learn.
     Bench {
         /// Suite name.
         name: String,
@@ -646,9 +646,10 @@ fn bench(
         "robots" => crate::benches::robots_cases(&opts).map_err(CliError::runtime)?,
         "render" => crate::benches::render_cases(&opts).map_err(CliError::runtime)?,
         "tasks" => crate::benches::tasks_cases(&opts).map_err(CliError::runtime)?,
+        "learn" => crate::bench_learn::learn_cases(&opts).map_err(CliError::runtime)?,
         other => {
             return Err(CliError::input(format!(
-                "bench {other}: unknown suite; available: engine, fem, pbd, contact, robots, render, tasks"
+                "bench {other}: unknown suite; available: engine, fem, pbd, contact, robots, render, tasks, learn"
             )))
         }
     };

@@ -17,6 +17,7 @@ pub use modesuite_robots as robots;
 pub use modesuite_tasks as tasks;
 
 pub mod bench_contact;
+pub mod bench_learn;
 pub mod benches;
 pub mod cli;
 pub mod episode;

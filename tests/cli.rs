@@ -271,6 +271,11 @@ fn bench_suites_json_have_their_keys() {
             &["task"][..],
         ),
         (
+            "learn",
+            &["vecenv_x16", "ppo_x16", "sac_x16"][..],
+            &["task"][..],
+        ),
+        (
             "contact",
             &[
                 "tori_stacked",
@@ -299,6 +304,17 @@ fn bench_suites_json_have_their_keys() {
                 assert!(l.get(*k).is_some(), "{suite}/{c}: missing {k} in {l}");
             }
             println!("{l}");
+        }
+        if suite == "learn" {
+            // whole iterations (one at this scale) and a share of the time in the learner
+            for (case, steps) in [("ppo_x16", 512), ("sac_x16", 256)] {
+                for l in lines.iter().filter(|l| l["case"] == case) {
+                    assert_eq!(l["env_steps"], steps, "{l}");
+                    let share = l["learner_share"].as_f64().unwrap();
+                    assert!(share > 0.0 && share < 1.0, "{l}");
+                    assert!(l["vs_vecenv"].as_f64().unwrap() > 0.0, "{l}");
+                }
+            }
         }
         if suite == "tasks" {
             // the single env's rounds interleaved with the x16 ones, and the overhead per round

@@ -55,6 +55,11 @@ pub struct BcConfig {
     /// ACT's `exp(-m j)` with `j = 0` the oldest; ACT's m = 0.01); `None` (default): each chunk
     /// played open-loop to its end. Kept in `policy.json` as `ensemble`.
     pub ensemble: Option<f64>,
+    /// Standard deviation of Gaussian noise added to the normalised observations of every
+    /// minibatch (fresh noise each time a sample is drawn; 0, the default: none). It teaches the
+    /// policy the demonstration's actions in states a little off the demonstrated ones, where a
+    /// policy that drifts finds itself. Only training uses it.
+    pub input_noise: f64,
 }
 
 impl Default for BcConfig {
@@ -69,6 +74,7 @@ impl Default for BcConfig {
             obs_clip: 10.0,
             chunk: 1,
             ensemble: None,
+            input_noise: 0.0,
         }
     }
 }
@@ -97,6 +103,9 @@ impl BcConfig {
         }
         if !(1..=MAX_CHUNK).contains(&self.chunk) {
             return bad(format!("chunk = {}: 1..={MAX_CHUNK} actions", self.chunk));
+        }
+        if !(self.input_noise.is_finite() && self.input_noise >= 0.0) {
+            return bad(format!("input_noise = {}: a number >= 0", self.input_noise));
         }
         crate::chunks::check_ensemble(self.ensemble, self.chunk, "chunk")
             .map_err(LearnError::Config)
@@ -290,6 +299,8 @@ pub fn train_bc(
     let mut actor = SacActor::new(&mut rng, od, outputs, &sac, &device);
     let mut opt = AdamConfig::new().with_epsilon(1e-8).init();
     let mut order: Vec<usize> = (0..n).collect();
+    // the noise's own stream: runs without noise draw nothing and stay as they were
+    let mut noise_rng = Rng::derive(cfg.seed, 1);
     let (mut final_loss, mut steps) = (0.0, 0u64);
     let b = cfg.batch_size.min(n);
     for epoch in 0..cfg.epochs {
@@ -302,6 +313,11 @@ pub fn train_bc(
             for &i in chunk {
                 x.extend_from_slice(&obs[i * od..(i + 1) * od]);
                 y.extend_from_slice(&target[i * outputs..(i + 1) * outputs]);
+            }
+            if cfg.input_noise > 0.0 {
+                for v in &mut x {
+                    *v += (cfg.input_noise * noise_rng.normal()) as f32;
+                }
             }
             let x = tensor2(&x, rows, od, &device);
             let y = tensor2(&y, rows, outputs, &device);
@@ -428,6 +444,69 @@ mod tests {
         let e = train_bc(&bad_ends, &cfg, "k", "{}", &dir, |_, _| {}).unwrap_err();
         assert!(e.to_string().contains("episode_ends"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Input noise regresses the action on noisy observations: a step from -0.5 to 0.5 at 0
+    /// is learned sharp without noise and smoothed to about the Gaussian's closed form with
+    /// it (E[y | x + e = z] = 0.5 (2 Phi(z / s) - 1) well inside the data); bad values refused.
+    #[test]
+    fn input_noise_smooths_the_learned_action() {
+        let obs: Vec<f32> = (0..200).map(|i| (i as f32 + 0.5) / 100.0 - 1.0).collect();
+        let act: Vec<f32> = obs.iter().map(|x| 0.5 * x.signum()).collect();
+        let demos = Demos {
+            obs: obs.clone(),
+            act,
+            obs_dim: 1,
+            act_dim: 1,
+            low: vec![-1.0],
+            high: vec![1.0],
+            discrete: None,
+            episode_ends: Vec::new(),
+        };
+        let at = |noise: f64| {
+            let cfg = BcConfig {
+                hidden: vec![64, 64],
+                epochs: 400,
+                batch_size: 50,
+                input_noise: noise,
+                ..BcConfig::default()
+            };
+            let dir = std::env::temp_dir()
+                .join(format!("modesuite-bc-noise-{noise}-{}", std::process::id()));
+            train_bc(&demos, &cfg, "step", "{}", &dir, |_, _| {}).unwrap();
+            let a = Policy::load(&dir).unwrap().act(&[0.1])[0];
+            let _ = std::fs::remove_dir_all(&dir);
+            a
+        };
+        // x = 0.1 is z = 0.1 / std(x) = 0.173 in normalised units
+        let std = (obs.iter().map(|x| x * x).sum::<f32>() / 200.0).sqrt();
+        let z = f64::from(0.1 / std);
+        // the normal CDF by Abramowitz and Stegun 7.1.26 (|error| < 1.5e-7), for u >= 0
+        let phi = |u: f64| {
+            let x = u / std::f64::consts::SQRT_2;
+            let t = 1.0 / (1.0 + 0.327_591_1 * x);
+            let poly = t
+                * (0.254_829_592
+                    + t * (-0.284_496_736
+                        + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+            0.5 * (2.0 - poly * (-x * x).exp())
+        };
+        let want = 0.5 * (2.0 * phi(z / 0.5) - 1.0);
+        let (sharp, smooth) = (at(0.0), at(0.5));
+        println!(
+            "BC at x = 0.1: no noise {sharp:.3} (tolerance > 0.4), noise 0.5 {smooth:.3} (closed form {want:.3} +- 0.08)"
+        );
+        assert!(sharp > 0.4, "{sharp}");
+        assert!(
+            (f64::from(smooth) - want).abs() < 0.08,
+            "{smooth} vs {want}"
+        );
+        let cfg = BcConfig {
+            input_noise: -0.1,
+            ..BcConfig::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains("input_noise = -0.1"), "{e}");
     }
 
     /// Three keys by the sign pattern of a 2-d observation: the classification head learns
