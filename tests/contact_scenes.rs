@@ -367,7 +367,7 @@ fn a_box_as_heavy_as_the_foam_block_rests_on_it_with_coupling_substeps() {
 
 #[test]
 fn a_box_lighter_than_the_foam_block_rests_on_it_without_trembling() {
-    // 2 kg on the 2.7 kg block: k dt^2 / m about 7 at rest, four coupling substeps; seen at
+    // 2 kg on the 2.7 kg block: k dt^2 / m about 5-7 at rest, four coupling substeps; seen at
     // its own velocity by the block, the box trembled at 1.55 cm/s (the reaction flipping
     // between 38 N and 1 N every substep), seen at its common motion with the nodes it touches
     // it rests

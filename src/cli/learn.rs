@@ -173,6 +173,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         if summary.resumed { " (resumed)" } else { "" },
         summary
             .last
+            .as_ref()
             .map_or("-".to_string(), |m| m.progress_line(total))
     )
     .map_err(io)?;
@@ -184,15 +185,20 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         .map_err(io)?;
     }
     let learner = outcome.wall_seconds - outcome.env_seconds;
-    writeln!(
-        out,
-        "time: {:.1} s, of which envs {:.1} s and learner {:.1} s ({:.1} %)",
-        outcome.wall_seconds,
-        outcome.env_seconds,
-        learner,
-        100.0 * learner / outcome.wall_seconds.max(1e-9)
-    )
-    .map_err(io)?;
+    if summary.last.is_none() {
+        // a finished run resumed: a share of a few milliseconds says nothing
+        writeln!(out, "time: nothing left to train").map_err(io)?;
+    } else {
+        writeln!(
+            out,
+            "time: {:.1} s, of which envs {:.1} s and learner {:.1} s ({:.1} %)",
+            outcome.wall_seconds,
+            outcome.env_seconds,
+            learner,
+            100.0 * learner / outcome.wall_seconds.max(1e-9)
+        )
+        .map_err(io)?;
+    }
     Ok(())
 }
 

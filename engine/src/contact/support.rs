@@ -15,7 +15,8 @@
 //!   [`DeformableSolver::compression_modulus`](crate::deformable::solver::DeformableSolver::compression_modulus)
 //!   and each dynamic scene body, the surface nodes within the body's reach (the surface's
 //!   contact thickness, [`SUPPORT_GAP`], and the distance the body travels in a physics step)
-//!   are taken one by one: a ray from the node away from the body, through the deformable's own
+//!   are taken one by one (a node on the body's surface too, along the body's outward normal
+//!   there): a ray from the node away from the body, through the deformable's own
 //!   surface, finds the layer's far side (column height `h`), and the node counts if a fixed
 //!   rigid collider is within the contact thickness plus [`SUPPORT_GAP`] of that point;
 //! - they add up to `k = E sum(a / h)` (a: the node's share of the surface area), and
@@ -187,6 +188,18 @@ pub fn stiffness_ratios(world: &World) -> Vec<PressedPair> {
     out
 }
 
+/// The outward unit normal of collider `co`'s shape at its boundary point nearest `p` (world
+/// frame), where the shape defines one.
+fn outward_normal(co: &Collider, p: &Vector3<f64>) -> Option<Vector3<f64>> {
+    let pose = co.position();
+    let (proj, feature) = co
+        .shape()
+        .project_point_and_get_feature(pose, vec_to_rapier(p));
+    let local = pose.inverse_transform_point(proj.point);
+    let n = co.shape().feature_normal_at_point(0, feature, local)?;
+    vec_from_rapier(pose.rotation * n).try_normalize(1e-12)
+}
+
 /// The fixed rigid colliders (on fixed bodies or none; not deformables' surface colliders): what
 /// can hold a layer up. Gathered at most once per physics step, for the first deformable with
 /// bodies to weigh.
@@ -287,14 +300,24 @@ impl Under<'_> {
                     .project_point(co.position(), vec_to_rapier(p), false);
                 let to = p - vec_from_rapier(proj.point);
                 let dist = to.norm();
-                if dist < 1e-9 || (!proj.is_inside && dist > reach) {
+                if !proj.is_inside && dist > reach {
                     continue;
                 }
-                // away from the body: into the layer
-                let inward = if proj.is_inside {
-                    -to / dist
+                // away from the body: into the layer; a node on the body's surface (a contact
+                // holds it there at rest) along the body's outward normal at that point (it
+                // was skipped, and whether a resting node sat 1e-9 m off the surface or not
+                // decided the coupling substeps)
+                let inward = if dist >= 1e-9 {
+                    if proj.is_inside {
+                        -to / dist
+                    } else {
+                        to / dist
+                    }
                 } else {
-                    to / dist
+                    match outward_normal(co, p) {
+                        Some(n) => n,
+                        None => continue,
+                    }
                 };
                 if let Some(h) = self.supported_column(l, p, &inward) {
                     sum += l.areas[i] / h;

@@ -47,6 +47,7 @@ impl FemSolid {
             precond: None,
             profile_costs: model.profile.costs(),
             precond_mat: Vec::new(),
+            factor_anchor: Vec::new(),
             precond_mat_key: None,
             precond_gen: 0,
             constraint_version: 0,

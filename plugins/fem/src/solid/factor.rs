@@ -4,7 +4,7 @@
 
 use super::{quantised_normal, ConKind, FactorContact, FemSolid};
 use crate::error::FemError;
-use crate::precond::{ContactFactor, Penalty, Solved};
+use crate::precond::{entries, plan, ContactFactor, Penalty, Plan, Solved};
 use crate::sparse::ProfileCholesky;
 use nalgebra::{Matrix3, Vector3};
 
@@ -63,12 +63,12 @@ impl FemSolid {
         ];
         let previous = self.precond.take();
         if self.precond_mat_key == Some(mat_key) {
-            // only the contacts changed: the matrix without them is the one built last time
-            let base = previous.and_then(|(_, f)| f.into_base());
-            if let Ok((f, k)) = self.contact_factor(base, true, &self.precond_mat, &contacts) {
-                self.precond = Some((key, f));
-                return Ok(k);
-            }
+            // only the contacts changed: the matrix without them is the one built last time,
+            // and the last factor's base is this matrix's with the current anchor
+            let base = previous.map(|(_, f)| f.into_base());
+            let (f, k) = self.contact_factor(base, &contacts)?;
+            self.precond = Some((key, f));
+            return Ok(k);
         }
         self.precond_mat_key = None;
         let x_ref = self
@@ -87,7 +87,9 @@ impl FemSolid {
             self.model
                 .eval(&x_ref, &mut g, Some(&mut vals), project, None);
             self.system_matrix(&mut vals, c_mass, c_stiff);
-            out = self.contact_factor(None, false, &vals, &contacts);
+            self.precond_mat = vals;
+            out = self.contact_factor(None, &contacts);
+            vals = std::mem::take(&mut self.precond_mat);
             if out.is_ok() {
                 break;
             }
@@ -99,21 +101,19 @@ impl FemSolid {
         Ok(k)
     }
 
-    /// Factors the system matrix `vals` with the contacts' stiff penalties (their own stiffness,
-    /// or `1e6` times the norm of the node's diagonal block, along the normal; all three
-    /// directions when sticking),
-    /// reusing `base`, a factor of `vals` from an earlier contact set and the columns solved
-    /// with it, when given;
-    /// `contacts_changed`: `vals` was factored before with other contacts (see
-    /// [`ContactFactor::new`]).
+    /// Factors the system matrix `precond_mat` with the contacts' stiff penalties (their own
+    /// stiffness, or `1e6` times the norm of the node's diagonal block, along the normal; all
+    /// three directions when sticking): the factor of the matrix with the anchor's penalties
+    /// (`factor_anchor`), corrected by the difference to these, or, where that costs more than
+    /// a factorisation ([`plan`]), a new factor with these as the anchor. `base` is the last
+    /// factor's base when the matrix is the same and reused if the anchor stays.
     fn contact_factor(
-        &self,
+        &mut self,
         base: Option<(ProfileCholesky, Solved)>,
-        contacts_changed: bool,
-        vals: &[Matrix3<f64>],
         contacts: &[FactorContact],
     ) -> Result<(ContactFactor, usize), FemError> {
         let pat = &self.model.pattern;
+        let vals = &self.precond_mat;
         let penalties: Vec<Penalty> = contacts
             .iter()
             .map(|&(node, n, stick, k)| {
@@ -122,15 +122,29 @@ impl FemSolid {
                 (node, n, stick, k.unwrap_or(1e6 * scale))
             })
             .collect();
-        ContactFactor::new(
-            base,
-            contacts_changed,
-            vals,
-            &pat.diag,
-            &penalties,
+        let new = entries(&penalties);
+        let factor = |m: &[Matrix3<f64>], blocks: &[(usize, Matrix3<f64>)]| {
+            ProfileCholesky::factor(&self.model.profile, pat, m, blocks)
+        };
+        if let Plan::Keep(delta) = plan(
+            &self.factor_anchor,
+            &new,
+            self.n_nodes(),
             self.profile_costs,
-            |m, blocks| ProfileCholesky::factor(&self.model.profile, pat, m, blocks),
-        )
+        ) {
+            let (f, k) =
+                ContactFactor::new(base, vals, &pat.diag, &self.factor_anchor, &delta, factor)?;
+            if let Some(f) = f {
+                return Ok((f, k));
+            }
+            // S singular to working precision: the set becomes the anchor (below)
+            let (f, k2) = ContactFactor::new(None, vals, &pat.diag, &new, &[], factor)?;
+            self.factor_anchor = new;
+            return Ok((f.expect("no correction to refuse"), k + k2));
+        }
+        let (f, k) = ContactFactor::new(None, vals, &pat.diag, &new, &[], factor)?;
+        self.factor_anchor = new;
+        Ok((f.expect("no correction to refuse"), k))
     }
 
     /// Turns the scaled elastic Hessian in `vals` into the system matrix without contacts:

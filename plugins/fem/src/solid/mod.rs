@@ -81,7 +81,7 @@ mod tests;
 
 use crate::coupling::PointContact;
 use crate::model::SolidModel;
-use crate::precond::ContactFactor;
+use crate::precond::{ContactFactor, Entry};
 use crate::warp::Warp;
 use nalgebra::{Isometry3, Matrix3, Vector3};
 use std::sync::Arc;
@@ -309,7 +309,8 @@ const ACTIVATION_ROUNDS: usize = 8;
 const MAX_STEP_HALVINGS: u32 = 3;
 
 const STATE_MAGIC_V1: f64 = 7.1e7 + 1.0; // format tag of get_state, version 1 (no contact memory)
-const STATE_MAGIC: f64 = 7.1e7 + 2.0; // format tag of get_state (version 2)
+const STATE_MAGIC_V2: f64 = 7.1e7 + 2.0; // format tag of get_state, version 2 (no factor anchor)
+const STATE_MAGIC: f64 = 7.1e7 + 3.0; // format tag of get_state (version 3)
 
 /// A tetrahedral elastic solid with quadratic elements: model, state, constraints and solver.
 ///
@@ -381,6 +382,10 @@ pub struct FemSolid {
     con_forces: Vec<(u32, Vector3<f64>)>,
     /// Active contacts at the end of the last step, by node (part of the state).
     contact_memory: Vec<ContactMemory>,
+    /// The contact penalties the factor's base holds (see [`crate::precond`]): later contact
+    /// sets correct that factor by their difference. Part of the state, so that a restored
+    /// solid factors and solves as the uninterrupted one.
+    factor_anchor: Vec<Entry>,
     /// Elastic and full gradient at a line search's first trial point (swapped into `egrad` and
     /// `grad` when the trial is taken).
     trial_egrad: Vec<Vector3<f64>>,

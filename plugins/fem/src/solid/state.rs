@@ -3,7 +3,7 @@
 
 use super::{
     finite3, Attachment, ContactMemory, FemSolid, Grasp, GraspParams, WorldConstraint, STATE_MAGIC,
-    STATE_MAGIC_V1,
+    STATE_MAGIC_V1, STATE_MAGIC_V2,
 };
 use crate::error::FemError;
 use nalgebra::{Isometry3, Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
@@ -13,9 +13,12 @@ impl FemSolid {
 
     /// Full dynamic state as a flat vector: positions, velocities, step count, external loads,
     /// world constraints, body poses, attachments, grasps (with slip state), the
-    /// preconditioner's reference shape, the Young's modulus scale and the contacts the last step
-    /// ended with (the next step's first guess). `set_state(get_state())` is a bit-exact round
-    /// trip. [`FemSolid::set_state`] also reads the previous format (without the contacts).
+    /// preconditioner's reference shape, the Young's modulus scale, the contacts the last step
+    /// ended with (the next step's first guess) and the contact penalties of the factor's anchor
+    /// (the factor is rebuilt from them, so a restored solid solves bit for bit as the
+    /// uninterrupted one). `set_state(get_state())` is a bit-exact round trip.
+    /// [`FemSolid::set_state`] also reads the two previous formats (without the anchor, and
+    /// without the contacts either).
     pub fn get_state(&self) -> Vec<f64> {
         let mut s = vec![
             STATE_MAGIC,
@@ -83,6 +86,12 @@ impl FemSolid {
             push3(&mut s, &m.slip_dir);
             s.push(m.normal_force);
         }
+        s.push(self.factor_anchor.len() as f64);
+        for (node, d, k) in &self.factor_anchor {
+            s.push(f64::from(*node));
+            push3(&mut s, d);
+            s.push(*k);
+        }
         s
     }
 
@@ -90,7 +99,7 @@ impl FemSolid {
     pub fn set_state(&mut self, state: &[f64]) -> Result<(), FemError> {
         let mut r = Reader { s: state, i: 0 };
         let version = r.next()?;
-        if version != STATE_MAGIC && version != STATE_MAGIC_V1 {
+        if ![STATE_MAGIC, STATE_MAGIC_V2, STATE_MAGIC_V1].contains(&version) {
             return Err(FemError::InvalidState(
                 "not a modesuite-fem state vector (bad tag)".into(),
             ));
@@ -208,7 +217,7 @@ impl FemSolid {
             )));
         }
         let mut contact_memory = Vec::new();
-        if version == STATE_MAGIC {
+        if version != STATE_MAGIC_V1 {
             let count = r.count()?;
             for _ in 0..count {
                 let node = r.node(n)?;
@@ -236,6 +245,21 @@ impl FemSolid {
                 ));
             }
         }
+        let mut factor_anchor = Vec::new();
+        if version == STATE_MAGIC {
+            let count = r.count()?;
+            for _ in 0..count {
+                let node = r.node(n)?;
+                let d = r.v3()?;
+                let k = r.next()?;
+                if !(finite3(&d) && k.is_finite() && k > 0.0) {
+                    return Err(FemError::InvalidState(format!(
+                        "factor anchor: node {node} direction {d:?} stiffness {k}"
+                    )));
+                }
+                factor_anchor.push((node, d, k));
+            }
+        }
         if r.i != state.len() {
             return Err(FemError::InvalidState(format!(
                 "{} trailing values",
@@ -257,6 +281,7 @@ impl FemSolid {
         self.precond_gen += 1;
         self.stiffness_scale = stiffness_scale;
         self.contact_memory = contact_memory;
+        self.factor_anchor = factor_anchor;
         self.precond = None;
         self.constraint_version += 1;
         self.refresh_grasp_anchors();

@@ -42,15 +42,25 @@ fn the_state_keeps_the_contact_memory_and_reads_the_old_format() {
     let mut b = block_on_floor();
     b.set_state(&state).unwrap();
     assert_eq!(b.contact_memory, a.contact_memory);
+    assert_eq!(b.factor_anchor.len(), a.factor_anchor.len());
+    // version 2: without the factor's anchor (a restored solid factors afresh)
+    let m = a.factor_anchor.len();
+    assert!(m > 0, "the resting block's contacts are in the factor");
+    let mut v2 = state[..state.len() - 1 - 5 * m].to_vec();
+    v2[0] = STATE_MAGIC_V2;
+    let mut c2 = block_on_floor();
+    c2.set_state(&v2).unwrap();
+    assert_eq!(c2.contact_memory, a.contact_memory);
+    assert!(c2.factor_anchor.is_empty());
     // version 1: the same without the memory (a restored solid starts from scratch)
-    let mut v1 = state[..state.len() - 1 - 7 * k].to_vec();
+    let mut v1 = v2[..v2.len() - 1 - 7 * k].to_vec();
     v1[0] = STATE_MAGIC_V1;
     let mut c = block_on_floor();
     c.set_state(&v1).unwrap();
     assert!(c.contact_memory.is_empty());
     assert_eq!(c.positions(), a.positions());
     // a version-1 tag with the memory appended is trailing data
-    let mut bad = state.clone();
+    let mut bad = v2.clone();
     bad[0] = STATE_MAGIC_V1;
     assert!(matches!(b.set_state(&bad), Err(FemError::InvalidState(_))));
     // setting positions by hand forgets the contacts
