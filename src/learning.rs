@@ -30,6 +30,22 @@ pub const EVAL_SEED: u64 = 1_000_000;
 /// First bytes of [`SimEnv`]'s saved environments (inside a learner's checkpoint).
 const SIM_ENV_STATE: &[u8] = b"modesuite-simenv-1\n";
 
+/// A call a [`SimEnv`] passed on to its [`VecEnv`], logged when asked
+/// ([`TrainRequest::log_env_calls`]): `bench learn` replays a training's env work without the
+/// learner.
+#[derive(Clone, Debug, PartialEq)]
+pub enum EnvCall {
+    /// `VecEnv::reset(Some(seed))`.
+    Reset(u64),
+    /// `VecEnv::step(actions)`, with the sum of the rewards it returned (to check a replay).
+    Step {
+        /// The actions of every env, row-major.
+        actions: Vec<f32>,
+        /// The sum of the step's rewards (f64, in env order).
+        reward_sum: f64,
+    },
+}
+
 /// A [`VecEnv`] of state observations and continuous actions, as the learners see it.
 ///
 /// An episode that ends in an error (a physics blow-up, a non-finite action) is cut short by
@@ -53,6 +69,8 @@ pub struct SimEnv {
     error_penalty: Option<f32>,
     /// Reward added to the step on which the task ends an episode as failed.
     failure_penalty: Option<f32>,
+    /// The calls passed on to the envs, when logged.
+    log: Option<Vec<EnvCall>>,
 }
 
 impl SimEnv {
@@ -89,7 +107,19 @@ impl SimEnv {
             env_seconds: 0.0,
             error_penalty: None,
             failure_penalty: None,
+            log: None,
         })
+    }
+
+    /// Logs every reset and step passed on to the envs ([`SimEnv::take_log`]).
+    pub fn with_log(mut self) -> Self {
+        self.log = Some(Vec::new());
+        self
+    }
+
+    /// The calls logged so far (`None` when not logging).
+    pub fn take_log(&mut self) -> Option<Vec<EnvCall>> {
+        self.log.take()
     }
 
     /// Ends episodes that fail (a physics blow-up) as terminal states with reward `penalty`
@@ -168,6 +198,9 @@ impl VecEnvironment for SimEnv {
         let t = std::time::Instant::now();
         let obs = self.vec.reset(Some(seed)).0;
         self.env_seconds += t.elapsed().as_secs_f64();
+        if let Some(log) = &mut self.log {
+            log.push(EnvCall::Reset(seed));
+        }
         self.last_obs.clone_from(&obs);
         Ok(obs)
     }
@@ -176,6 +209,12 @@ impl VecEnvironment for SimEnv {
         let t = std::time::Instant::now();
         let out = self.vec.step(actions).map_err(|e| e.to_string())?;
         self.env_seconds += t.elapsed().as_secs_f64();
+        if let Some(log) = &mut self.log {
+            log.push(EnvCall::Step {
+                actions: actions.to_vec(),
+                reward_sum: out.rewards.iter().sum(),
+            });
+        }
         let n = out.rewards.len();
         let mut step = BatchStep {
             obs: out.observations,
@@ -255,6 +294,8 @@ pub struct TrainRequest {
     pub actions: Option<String>,
     /// The command line, recorded with the policy.
     pub command: String,
+    /// Log the envs' calls into [`TrainOutcome::env_calls`] (`bench learn`).
+    pub log_env_calls: bool,
 }
 
 /// Default env steps of a run when neither the command nor the task's file gives them.
@@ -355,6 +396,8 @@ pub struct TrainOutcome {
     pub wall_seconds: f64,
     /// Of which stepping and resetting the envs.
     pub env_seconds: f64,
+    /// The envs' calls, when [`TrainRequest::log_env_calls`] asked for them.
+    pub env_calls: Option<Vec<EnvCall>>,
 }
 
 /// Trains (or resumes) a run; `progress` receives each iteration's metrics. Errors are
@@ -375,6 +418,9 @@ pub fn train(
         .map_err(MakeError::Input)?
         .with_error_penalty(cfg.error_penalty())
         .with_failure_penalty(cfg.failure_penalty());
+    if req.log_env_calls {
+        env = env.with_log();
+    }
     let note = json!({"target": req.target, "actions": req.actions, "algo": req.algo,
                       "envs": req.envs, "command": req.command})
     .to_string();
@@ -409,6 +455,7 @@ pub fn train(
         summary,
         wall_seconds: start.elapsed().as_secs_f64(),
         env_seconds: env.env_seconds,
+        env_calls: env.take_log(),
     })
 }
 

@@ -312,6 +312,8 @@ fn bench_suites_json_have_their_keys() {
                     assert_eq!(l["env_steps"], steps, "{l}");
                     let share = l["learner_share"].as_f64().unwrap();
                     assert!(share > 0.0 && share < 1.0, "{l}");
+                    // the replay of the training's env calls (same states, checked)
+                    assert!(l["replay_steps_per_s"].as_f64().unwrap() > 0.0, "{l}");
                     assert!(l["vs_vecenv"].as_f64().unwrap() > 0.0, "{l}");
                 }
             }

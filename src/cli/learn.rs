@@ -133,6 +133,7 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         checkpoint_every: args.checkpoint_every,
         actions: args.actions.clone(),
         command: std::env::args().collect::<Vec<_>>().join(" "),
+        log_env_calls: false,
     };
     let (cfg, files) = learning::resolve_config(&req).map_err(CliError::input)?;
     let total = args

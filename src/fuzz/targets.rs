@@ -504,6 +504,7 @@ fn small_run(dir: &Path, env_steps: u64) -> Result<(), String> {
         checkpoint_every: 1,
         actions: None,
         command: "fuzz".into(),
+        log_env_calls: false,
     };
     crate::learning::train(&req, |_| {})
         .map(|_| ())
