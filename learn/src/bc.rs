@@ -378,6 +378,20 @@ mod tests {
     use super::*;
     use crate::policy::Policy;
 
+    /// Continuous demonstrations of one observation and one action in [-1, 1].
+    fn demos_1d(obs: Vec<f32>, act: Vec<f32>, episode_ends: Vec<usize>) -> Demos {
+        Demos {
+            obs,
+            act,
+            obs_dim: 1,
+            act_dim: 1,
+            low: vec![-1.0],
+            high: vec![1.0],
+            discrete: None,
+            episode_ends,
+        }
+    }
+
     /// Action chunks: a policy of chunk 3 learns each sample's next three actions, the
     /// demonstration's last one repeated past its end (never the next demonstration's), and
     /// `act` gives the first of them. Two demonstrations of a counter: observation t, action t
@@ -391,16 +405,7 @@ mod tests {
                 act.push(t as f32 * 0.1);
             }
         }
-        let demos = Demos {
-            obs,
-            act,
-            obs_dim: 1,
-            act_dim: 1,
-            low: vec![-1.0],
-            high: vec![1.0],
-            discrete: None,
-            episode_ends: vec![6, 10],
-        };
+        let demos = demos_1d(obs, act, vec![6, 10]);
         let cfg = BcConfig {
             hidden: vec![64, 64],
             epochs: 3000,
@@ -453,16 +458,7 @@ mod tests {
     fn input_noise_smooths_the_learned_action() {
         let obs: Vec<f32> = (0..200).map(|i| (i as f32 + 0.5) / 100.0 - 1.0).collect();
         let act: Vec<f32> = obs.iter().map(|x| 0.5 * x.signum()).collect();
-        let demos = Demos {
-            obs: obs.clone(),
-            act,
-            obs_dim: 1,
-            act_dim: 1,
-            low: vec![-1.0],
-            high: vec![1.0],
-            discrete: None,
-            episode_ends: Vec::new(),
-        };
+        let demos = demos_1d(obs.clone(), act, Vec::new());
         let at = |noise: f64| {
             let cfg = BcConfig {
                 hidden: vec![64, 64],
