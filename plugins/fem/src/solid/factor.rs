@@ -66,9 +66,11 @@ impl FemSolid {
             // only the contacts changed: the matrix without them is the one built last time,
             // and the last factor's base is this matrix's with the current anchor
             let base = previous.map(|(_, f)| f.into_base());
-            let (f, k) = self.contact_factor(base, &contacts)?;
-            self.precond = Some((key, f));
-            return Ok(k);
+            if let Ok((f, k)) = self.contact_factor(base, &contacts) {
+                self.precond = Some((key, f));
+                return Ok(k);
+            }
+            // not positive definite with these penalties: rebuild the matrix (projected) below
         }
         self.precond_mat_key = None;
         let x_ref = self
