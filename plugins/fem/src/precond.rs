@@ -49,7 +49,7 @@ const NEW_COLUMN_SHARE: f64 = 0.25;
 
 /// Columns kept for reuse on one anchor (each `n` blocks); beyond, only the current
 /// correction's are kept.
-const MAX_SOLVED: usize = 128;
+const MAX_SOLVED: usize = 256;
 
 /// The penalties as entries, in their order: a sticking contact's axes x, y, z, a sliding
 /// contact's normal.
