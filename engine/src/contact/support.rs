@@ -16,7 +16,7 @@
 //!   and each dynamic scene body, the surface nodes within the body's reach (the surface's
 //!   contact thickness, [`SUPPORT_GAP`], and the distance the body travels in a physics step)
 //!   are taken one by one (a node on the body's surface too, along the body's outward normal
-//!   there): a ray from the node away from the body, through the deformable's own
+//!   there where its shape gives one: boxes, balls, convex hulls; not meshes or compounds): a ray from the node away from the body, through the deformable's own
 //!   surface, finds the layer's far side (column height `h`), and the node counts if a fixed
 //!   rigid collider is within the contact thickness plus [`SUPPORT_GAP`] of that point;
 //! - they add up to `k = E sum(a / h)` (a: the node's share of the surface area), and
@@ -189,8 +189,12 @@ pub fn stiffness_ratios(world: &World) -> Vec<PressedPair> {
 }
 
 /// The outward unit normal of collider `co`'s shape at its boundary point nearest `p` (world
-/// frame), where the shape defines one.
+/// frame), where the shape defines one; `None` for composite shapes (meshes, compounds: the
+/// feature alone does not name the part) and shapes without feature normals.
 fn outward_normal(co: &Collider, p: &Vector3<f64>) -> Option<Vector3<f64>> {
+    if co.shape().as_composite_shape().is_some() {
+        return None;
+    }
     let pose = co.position();
     let (proj, feature) = co
         .shape()

@@ -20,8 +20,8 @@
 //! box on a belt lying on the ground: 1 to 37 of 369 contacts flip each round) was refactored
 //! 4-5 times a step; with the anchor, its rounds solve a few cached columns instead.
 //! Removing an entry cancels: `S`'s diagonal is `-1/k + d^T B^-1 d`, two numbers equal to
-//! about 1e-6 relative for the penalties of 1e6 times the diagonal, so the correction is
-//! exact to about 1e-10 relative. The factor only preconditions the chord's conjugate
+//! about 1e-6 relative for the penalties of 1e6 times the diagonal, so the correction loses
+//! about six digits (3e-11 relative in the unit test, whose tolerance is 1e-7). The factor only preconditions the chord's conjugate
 //! gradients, which converge to their tolerance either way.
 
 use crate::error::FemError;
@@ -181,8 +181,9 @@ impl ContactFactor {
     /// earlier factor of the same `a` and anchor (from [`ContactFactor::into_base`]), reused
     /// with its columns when given. `factor` factors block values with some diagonal blocks
     /// replaced (see [`ProfileCholesky::factor`]). Returns the factor and the number of
-    /// factorisations done. A correction whose `S` is singular to working precision is refused
-    /// (`None`): the caller makes the set the anchor instead.
+    /// factorisations done. A correction whose `S` is not finite or has a zero pivot is refused
+    /// (`None`): the caller makes the set the anchor instead. (A nearly singular `S`, or one
+    /// whose inertia says the corrected matrix is indefinite, is not detected.)
     pub(crate) fn new(
         base: Option<(ProfileCholesky, Solved)>,
         a: &[Matrix3<f64>],
@@ -235,6 +236,9 @@ impl ContactFactor {
                 v
             }
         });
+        if !s.iter().all(|v| v.is_finite()) {
+            return Ok((None, factored));
+        }
         let lu = s.lu();
         if !lu.is_invertible() {
             return Ok((None, factored));

@@ -70,7 +70,8 @@ impl FemSolid {
                 self.precond = Some((key, f));
                 return Ok(k);
             }
-            // not positive definite with these penalties: rebuild the matrix (projected) below
+            // not positive definite with these penalties: rebuild the matrix below (projected
+            // where the first try fails)
         }
         self.precond_mat_key = None;
         let x_ref = self
@@ -134,12 +135,22 @@ impl FemSolid {
             self.n_nodes(),
             self.profile_costs,
         ) {
-            let (f, k) =
-                ContactFactor::new(base, vals, &pat.diag, &self.factor_anchor, &delta, factor)?;
-            if let Some(f) = f {
+            // the anchor's factor may fail (a state file's anchor); S may be singular or not
+            // finite: either way the set becomes the anchor (below), deterministically
+            let (tried, k) = match ContactFactor::new(
+                base,
+                vals,
+                &pat.diag,
+                &self.factor_anchor,
+                &delta,
+                factor,
+            ) {
+                Ok((f, k)) => (f, k),
+                Err(_) => (None, 0),
+            };
+            if let Some(f) = tried {
                 return Ok((f, k));
             }
-            // S singular to working precision: the set becomes the anchor (below)
             let (f, k2) = ContactFactor::new(None, vals, &pat.diag, &new, &[], factor)?;
             self.factor_anchor = new;
             return Ok((f.expect("no correction to refuse"), k + k2));

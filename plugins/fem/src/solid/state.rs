@@ -252,7 +252,7 @@ impl FemSolid {
                 let node = r.node(n)?;
                 let d = r.v3()?;
                 let k = r.next()?;
-                if !(finite3(&d) && k.is_finite() && k > 0.0) {
+                if !(finite3(&d) && (d.norm() - 1.0).abs() < 1e-9 && k > 0.0 && k < 1e300) {
                     return Err(FemError::InvalidState(format!(
                         "factor anchor: node {node} direction {d:?} stiffness {k}"
                     )));

@@ -185,6 +185,7 @@ impl FemSolid {
             .collect();
         let precond_backup = self.precond_at.clone();
         let memory_backup = self.contact_memory.clone();
+        let anchor_backup = self.factor_anchor.clone();
         let result = self.step_inner(dt, t0, gravity, contacts, reactions, mode);
         self.penalties.clear();
         self.penalty_factor.clear();
@@ -222,6 +223,9 @@ impl FemSolid {
             self.precond_at = precond_backup;
             self.precond_gen += 1;
             self.contact_memory = memory_backup;
+            // the state before the step, and no factor built at a discarded shape
+            self.factor_anchor = anchor_backup;
+            self.precond = None;
             reactions.truncate(reactions_len);
             return Err(err);
         }
