@@ -142,12 +142,7 @@ fn train_rate(
 
 /// The suite's cases (see the module docs), for one thread and for all of `opts.threads`.
 pub fn learn_cases(opts: &BenchOptions) -> Result<Vec<BenchRecord>, String> {
-    let all = rayon::ThreadPoolBuilder::new()
-        .num_threads(opts.threads)
-        .build()
-        .map_err(|e| e.to_string())?
-        .current_num_threads();
-    let threads: Vec<usize> = if all > 1 { vec![1, all] } else { vec![1] };
+    let threads = crate::benches::thread_counts(opts)?;
     // PPO: whole iterations of 16 envs x 32 steps (at least one)
     let ppo_iters = ((16.0 * opts.scale) as u64).max(1);
     let ppo_steps = ppo_iters * 32 * ENVS as u64;

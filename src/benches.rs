@@ -30,7 +30,7 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool, String> {
 
 /// The thread counts of the x16 cases: one, and all of `opts.threads` (0 = every core) when that
 /// is more than one.
-fn thread_counts(opts: &BenchOptions) -> Result<Vec<usize>, String> {
+pub(crate) fn thread_counts(opts: &BenchOptions) -> Result<Vec<usize>, String> {
     let all = pool(opts.threads)?.current_num_threads();
     Ok(if all > 1 { vec![1, all] } else { vec![1] })
 }

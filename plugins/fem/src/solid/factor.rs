@@ -129,35 +129,24 @@ impl FemSolid {
         let factor = |m: &[Matrix3<f64>], blocks: &[(usize, Matrix3<f64>)]| {
             ProfileCholesky::factor(&self.model.profile, pat, m, blocks)
         };
+        // the anchor's factor may fail (a state file's anchor), S may be singular or not
+        // finite: either way the set becomes the anchor, deterministically
+        let mut tried = 0;
         if let Plan::Keep(delta) = plan(
             &self.factor_anchor,
             &new,
             self.n_nodes(),
             self.profile_costs,
         ) {
-            // the anchor's factor may fail (a state file's anchor); S may be singular or not
-            // finite: either way the set becomes the anchor (below), deterministically
-            let (tried, k) = match ContactFactor::new(
-                base,
-                vals,
-                &pat.diag,
-                &self.factor_anchor,
-                &delta,
-                factor,
-            ) {
-                Ok((f, k)) => (f, k),
-                Err(_) => (None, 0),
-            };
-            if let Some(f) = tried {
-                return Ok((f, k));
+            match ContactFactor::new(base, vals, &pat.diag, &self.factor_anchor, &delta, factor) {
+                Ok((Some(f), k)) => return Ok((f, k)),
+                Ok((None, k)) => tried = k,
+                Err(_) => {}
             }
-            let (f, k2) = ContactFactor::new(None, vals, &pat.diag, &new, &[], factor)?;
-            self.factor_anchor = new;
-            return Ok((f.expect("no correction to refuse"), k + k2));
         }
         let (f, k) = ContactFactor::new(None, vals, &pat.diag, &new, &[], factor)?;
         self.factor_anchor = new;
-        Ok((f.expect("no correction to refuse"), k))
+        Ok((f.expect("no correction to refuse"), tried + k))
     }
 
     /// Turns the scaled elastic Hessian in `vals` into the system matrix without contacts:
