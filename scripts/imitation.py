@@ -33,12 +33,15 @@ TASKS = ["Spot-Uncover", "Spot-Cover", "Spot-Curtain", "Franka-Uncover", "Franka
 METHODS = {"bc": ("bc", []), "retrieval": ("retrieval", ["--set", "k=1"]),
            "bc-chunk5": ("bc", ["--set", "chunk=5"]),
            "bc-chunk5-ens": ("bc", ["--set", "chunk=5", "--set", "ensemble=0.01"]),
-           "retrieval-h10-ens": ("retrieval", ["--set", "horizon=10", "--set", "ensemble=0.01"])}
+           "retrieval-h10-ens": ("retrieval", ["--set", "horizon=10", "--set", "ensemble=0.01"]),
+           "bc-chunk5-ens-m5": ("bc", ["--set", "chunk=5", "--set", "ensemble=0.01", "--set", "members=5"])}
 # bc-chunk5-ens: the chunks played with ACT's temporal ensembling (learning.md), session 35;
-# retrieval-h10-ens: segments of 10 retrieved at every step and ensembled the same way
+# retrieval-h10-ens: segments of 10 retrieved at every step and ensembled the same way;
+# bc-chunk5-ens-m5: bc-chunk5-ens with 5 networks averaged (`members`, learning.md), session 37
 LABELS = {"bc": "BC", "retrieval": "Retrieval (k = 1)", "bc-chunk5": "BC, chunks of 5",
           "bc-chunk5-ens": "BC, chunks of 5, ensembled",
-          "retrieval-h10-ens": "Retrieval, segments of 10, ensembled"}
+          "retrieval-h10-ens": "Retrieval, segments of 10, ensembled",
+          "bc-chunk5-ens-m5": "BC, chunks of 5, ensembled, 5 members"}
 # the paper's (MoDeSuite, Table: imitation on Spot, DINOv2 features, 30 keyboard demonstrations)
 PAPER = {("Spot-Uncover", "bc"): 85, ("Spot-Cover", "bc"): 60, ("Spot-Curtain", "bc"): 60,
          ("Spot-Uncover", "retrieval"): 90, ("Spot-Cover", "retrieval"): 80, ("Spot-Curtain", "retrieval"): 80}

@@ -20,7 +20,9 @@ same ones to resume it) into `runs/<algo>/<task>+NAME/seed<k>`, its ledger and r
 
 Every evaluation line is also appended to `docs/results/evals/<algo>-<task>-seed<k>.jsonl`, which
 is committed: `runs/` (checkpoints, metrics) stays on the machine that trained, the record of
-what each run reached does not, and `--table` reads it when a run's folder is absent.
+what each run reached does not, and `--table` reads it when a run's folder is absent. A run
+started again where its folder is gone (a fresh machine) moves its old ledger to
+`docs/results/evals/superseded/restarted/` first, so the two runs' lines do not mix.
 """
 
 from __future__ import annotations
@@ -87,6 +89,17 @@ def one_run(binary: str, root: Path, algo: str, task: str, seed: int,
     d.mkdir(parents=True, exist_ok=True)
     evals = d / "evals.jsonl"
     done = {e["env_steps"] for e in read_lines(evals)}
+    old = ledger_path(algo, label, seed)
+    if not done and read_lines(old):
+        # the ledger of a run whose folder is gone (another machine, a fresh checkout): this
+        # run starts over, so its lines go aside instead of mixing with the new run's
+        aside = LEDGER / "superseded" / "restarted" / old.name
+        aside.parent.mkdir(parents=True, exist_ok=True)
+        if aside.exists():
+            aside = aside.with_name(f"{old.stem}-{int(aside.stat().st_mtime)}.jsonl")
+        os.rename(old, aside)
+        print(f"{d}: no evaluations here but a ledger: it starts over, the old ledger moved to "
+              f"{aside}", file=sys.stderr)
     if any(e["success_rate"] == 1.0 for e in read_lines(evals)):
         return
     for target in range(chunk, budget + 1, chunk):

@@ -60,6 +60,12 @@ pub struct BcConfig {
     /// policy the demonstration's actions in states a little off the demonstrated ones, where a
     /// policy that drifts finds itself. Only training uses it.
     pub input_noise: f64,
+    /// Networks trained on the same demonstrations from different initial weights and
+    /// shuffles (a deep ensemble; 1, the default: one network). The policy acts with the mean
+    /// of their outputs (of their logits for discrete keys), which evens out the luck of one
+    /// training seed. Member 0 is the network a single-member run trains; member `m >= 1`
+    /// draws from its own streams of `seed`. Kept in `policy.json` as `members`.
+    pub members: usize,
 }
 
 impl Default for BcConfig {
@@ -75,6 +81,7 @@ impl Default for BcConfig {
             chunk: 1,
             ensemble: None,
             input_noise: 0.0,
+            members: 1,
         }
     }
 }
@@ -107,12 +114,18 @@ impl BcConfig {
         if !(self.input_noise.is_finite() && self.input_noise >= 0.0) {
             return bad(format!("input_noise = {}: a number >= 0", self.input_noise));
         }
+        if !(1..=MAX_MEMBERS).contains(&self.members) {
+            return bad(format!(
+                "members = {}: 1..={MAX_MEMBERS} networks",
+                self.members
+            ));
+        }
         crate::chunks::check_ensemble(self.ensemble, self.chunk, "chunk")
             .map_err(LearnError::Config)
     }
 }
 
-pub use crate::policy::{MAX_CHUNK, MAX_ENSEMBLE};
+pub use crate::policy::{MAX_CHUNK, MAX_ENSEMBLE, MAX_MEMBERS};
 
 /// Demonstrations: one observation and the action taken per sample, row-major.
 #[derive(Clone, Debug, Default)]
@@ -155,9 +168,9 @@ pub struct BcSummary {
     /// Samples trained on.
     pub samples: usize,
     /// Loss of the last epoch: mean squared error in the squashed units, or the cross-entropy
-    /// of discrete keys.
+    /// of discrete keys (an ensemble's: the mean over its members).
     pub final_loss: f64,
-    /// Gradient steps taken.
+    /// Gradient steps taken (all members together).
     pub steps: u64,
 }
 
@@ -183,9 +196,11 @@ fn normaliser(d: &Demos, clip: f64) -> ObsNorm {
     }
 }
 
-/// Trains a policy on `demos` and writes it into `out` (`policy.json`, `weights.bpk`);
-/// `progress(epoch, loss)` after each epoch. `env` is the environment's identity string and
-/// `note` the policy's note (the CLI records the target and action modes there).
+/// Trains a policy on `demos` and writes it into `out` (`policy.json`, `weights.bpk`, and
+/// `weights.member<m>.bpk` for each further member); `progress(epoch, loss)` after each epoch,
+/// the epochs of the members counted one after another (`members x epochs` in all; the
+/// summary's loss is the members' mean). `env` is the environment's identity string and `note`
+/// the policy's note (the CLI records the target and action modes there).
 pub fn train_bc(
     demos: &Demos,
     cfg: &BcConfig,
@@ -290,58 +305,71 @@ pub fn train_bc(
         }
     };
     let device = Device::flex().autodiff();
-    let mut rng = Rng::new(cfg.seed);
     let sac = SacConfig {
         hidden: cfg.hidden.clone(),
         activation: cfg.activation,
         ..SacConfig::default()
     };
-    let mut actor = SacActor::new(&mut rng, od, outputs, &sac, &device);
-    let mut opt = AdamConfig::new().with_epsilon(1e-8).init();
-    let mut order: Vec<usize> = (0..n).collect();
-    // the noise's own stream: runs without noise draw nothing and stay as they were
-    let mut noise_rng = Rng::derive(cfg.seed, 1);
-    let (mut final_loss, mut steps) = (0.0, 0u64);
     let b = cfg.batch_size.min(n);
-    for epoch in 0..cfg.epochs {
-        rng.shuffle(&mut order);
-        let (mut sum, mut count) = (0.0, 0usize);
-        for chunk in order.chunks(b) {
-            let rows = chunk.len();
-            let mut x = Vec::with_capacity(rows * od);
-            let mut y = Vec::with_capacity(rows * outputs);
-            for &i in chunk {
-                x.extend_from_slice(&obs[i * od..(i + 1) * od]);
-                y.extend_from_slice(&target[i * outputs..(i + 1) * outputs]);
-            }
-            if cfg.input_noise > 0.0 {
-                for v in &mut x {
-                    *v += (cfg.input_noise * noise_rng.normal()) as f32;
+    let (mut loss_sum, mut steps) = (0.0, 0u64);
+    let mut weights = Vec::with_capacity(cfg.members);
+    for member in 0..cfg.members {
+        // member 0 draws as a single network always has; the others from streams of their own
+        let (mut rng, mut noise_rng) = if member == 0 {
+            (Rng::new(cfg.seed), Rng::derive(cfg.seed, 1))
+        } else {
+            let m = member as u64;
+            (
+                Rng::derive(cfg.seed, 2 * m + 100),
+                Rng::derive(cfg.seed, 2 * m + 101),
+            )
+        };
+        let mut actor = SacActor::new(&mut rng, od, outputs, &sac, &device);
+        let mut opt = AdamConfig::new().with_epsilon(1e-8).init();
+        let mut order: Vec<usize> = (0..n).collect();
+        let mut final_loss = 0.0;
+        for epoch in 0..cfg.epochs {
+            rng.shuffle(&mut order);
+            let (mut sum, mut count) = (0.0, 0usize);
+            for chunk in order.chunks(b) {
+                let rows = chunk.len();
+                let mut x = Vec::with_capacity(rows * od);
+                let mut y = Vec::with_capacity(rows * outputs);
+                for &i in chunk {
+                    x.extend_from_slice(&obs[i * od..(i + 1) * od]);
+                    y.extend_from_slice(&target[i * outputs..(i + 1) * outputs]);
                 }
+                if cfg.input_noise > 0.0 {
+                    for v in &mut x {
+                        *v += (cfg.input_noise * noise_rng.normal()) as f32;
+                    }
+                }
+                let x = tensor2(&x, rows, od, &device);
+                let y = tensor2(&y, rows, outputs, &device);
+                let loss = if demos.discrete.is_some() {
+                    // cross-entropy of the logits against the one-hot keys
+                    let logp = log_softmax(actor.forward(x).0, 1);
+                    -(logp * y).sum_dim(1).mean()
+                } else {
+                    (actor.mean_action(x) - y).square().mean()
+                };
+                let grads = GradientsParams::from_grads(loss.backward(), &actor);
+                actor = opt.step(cfg.learning_rate, actor, grads);
+                let l = f64::from(scalar(loss));
+                if !l.is_finite() {
+                    return Err(LearnError::Diverged(format!(
+                        "behaviour cloning: the loss became {l} in epoch {epoch}"
+                    )));
+                }
+                sum += l * rows as f64;
+                count += rows;
+                steps += 1;
             }
-            let x = tensor2(&x, rows, od, &device);
-            let y = tensor2(&y, rows, outputs, &device);
-            let loss = if demos.discrete.is_some() {
-                // cross-entropy of the logits against the one-hot keys
-                let logp = log_softmax(actor.forward(x).0, 1);
-                -(logp * y).sum_dim(1).mean()
-            } else {
-                (actor.mean_action(x) - y).square().mean()
-            };
-            let grads = GradientsParams::from_grads(loss.backward(), &actor);
-            actor = opt.step(cfg.learning_rate, actor, grads);
-            let l = f64::from(scalar(loss));
-            if !l.is_finite() {
-                return Err(LearnError::Diverged(format!(
-                    "behaviour cloning: the loss became {l} in epoch {epoch}"
-                )));
-            }
-            sum += l * rows as f64;
-            count += rows;
-            steps += 1;
+            final_loss = sum / count.max(1) as f64;
+            progress(member * cfg.epochs + epoch, final_loss);
         }
-        final_loss = sum / count.max(1) as f64;
-        progress(epoch, final_loss);
+        loss_sum += final_loss;
+        weights.push(record_bytes(actor.valid())?);
     }
     let meta = PolicyMeta {
         format_version: POLICY_FORMAT_VERSION,
@@ -363,12 +391,13 @@ pub fn train_bc(
         discrete: demos.discrete,
         chunk: k,
         ensemble: cfg.ensemble,
+        members: cfg.members,
     };
     std::fs::create_dir_all(out).map_err(|e| LearnError::Io(format!("{}: {e}", out.display())))?;
-    policy::write(out, &meta, record_bytes(actor.valid())?)?;
+    policy::write_members(out, &meta, weights)?;
     Ok(BcSummary {
         samples: n,
-        final_loss,
+        final_loss: loss_sum / cfg.members as f64,
         steps,
     })
 }
@@ -390,6 +419,122 @@ mod tests {
             discrete: None,
             episode_ends,
         }
+    }
+
+    /// An ensemble of 3 members acts with the mean of its networks' outputs (in `[-1, 1]`
+    /// units, then scaled into the bounds): each member loaded alone (its weights file renamed
+    /// to `weights.bpk`, `members` 1) gives its part, member 0 is bit for bit the network a
+    /// single-member run trains, the members differ, and a discrete ensemble takes the arg-max
+    /// of the mean logits.
+    #[test]
+    fn an_ensemble_acts_with_the_mean_of_its_members() {
+        // a noisy target: the members fit it differently
+        let obs: Vec<f32> = (0..40).map(|i| i as f32 * 0.05).collect();
+        let act: Vec<f32> = obs.iter().map(|x| (3.0 * x).sin() * 0.6).collect();
+        let demos = Demos {
+            low: vec![-2.0],
+            high: vec![2.0],
+            ..demos_1d(obs, act, vec![40])
+        };
+        let cfg = BcConfig {
+            hidden: vec![16],
+            epochs: 20,
+            batch_size: 8,
+            members: 3,
+            ..BcConfig::default()
+        };
+        let base =
+            std::env::temp_dir().join(format!("modesuite-bc-members-{}", std::process::id()));
+        let dir = base.join("ens");
+        let mut epochs = 0;
+        train_bc(&demos, &cfg, "sine", "{}", &dir, |_, _| epochs += 1).unwrap();
+        assert_eq!(epochs, 60, "progress counts every member's epochs");
+        let ens = Policy::load(&dir).unwrap();
+        assert_eq!(ens.meta().members, 3);
+        let x = [0.3f32, 1.1, 1.9];
+        let got = ens.act(&x);
+        // each member alone
+        let parts: Vec<Vec<f32>> = (0..3)
+            .map(|m| {
+                let d = base.join(format!("m{m}"));
+                std::fs::create_dir_all(&d).unwrap();
+                std::fs::copy(
+                    dir.join(crate::policy::weights_file(m)),
+                    d.join("weights.bpk"),
+                )
+                .unwrap();
+                let mut meta = ens.meta().clone();
+                meta.members = 1;
+                std::fs::write(d.join("policy.json"), serde_json::to_string(&meta).unwrap())
+                    .unwrap();
+                Policy::load(&d).unwrap().act(&x)
+            })
+            .collect();
+        assert_ne!(parts[0], parts[1]);
+        assert_ne!(parts[1], parts[2]);
+        for (i, g) in got.iter().enumerate() {
+            // back to [-1, 1] units (bounds -2..2), averaged, scaled again
+            let mean = parts.iter().map(|p| f64::from(p[i]) / 2.0).sum::<f64>() / 3.0;
+            println!(
+                "members' mean at {}: {g} (from the parts {:.6}), tolerance 1e-6",
+                x[i],
+                2.0 * mean
+            );
+            assert!(
+                (f64::from(*g) - 2.0 * mean).abs() < 1e-6,
+                "{got:?} vs {parts:?}"
+            );
+        }
+        // member 0 is the single network of the same seed
+        let one = base.join("one");
+        train_bc(
+            &demos,
+            &BcConfig {
+                members: 1,
+                ..cfg.clone()
+            },
+            "sine",
+            "{}",
+            &one,
+            |_, _| {},
+        )
+        .unwrap();
+        // (the files' bytes differ: burnpack records carry each parameter's own id)
+        assert_eq!(Policy::load(&one).unwrap().act(&x), parts[0]);
+        // discrete keys: the arg-max of the members' mean logits
+        let keys = Demos {
+            discrete: Some(3),
+            act: (0..40).map(|i| (i / 14) as f32).collect(),
+            ..demos.clone()
+        };
+        let kdir = base.join("keys");
+        train_bc(
+            &keys,
+            &BcConfig {
+                epochs: 200,
+                ..cfg.clone()
+            },
+            "keys",
+            "{}",
+            &kdir,
+            |_, _| {},
+        )
+        .unwrap();
+        let kp = Policy::load(&kdir).unwrap();
+        assert_eq!(kp.act(&[0.1, 1.0, 1.9]), vec![0.0, 1.0, 2.0]);
+        // out of range, and a missing member's file, are refused with the field or the file
+        let e = BcConfig {
+            members: 0,
+            ..cfg.clone()
+        }
+        .validate()
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("members = 0"), "{e}");
+        std::fs::remove_file(dir.join("weights.member2.bpk")).unwrap();
+        let e = Policy::load(&dir).err().unwrap().to_string();
+        assert!(e.contains("weights.member2.bpk"), "{e}");
+        let _ = std::fs::remove_dir_all(&base);
     }
 
     /// Action chunks: a policy of chunk 3 learns each sample's next three actions, the

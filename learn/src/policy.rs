@@ -1,6 +1,7 @@
 //! Trained policies as files: `policy.json` (what the network is, how observations are
-//! normalised, the action bounds, where it came from) and `weights.bpk` (burnpack), and
-//! [`Policy`], which loads them and acts deterministically (the mean action).
+//! normalised, the action bounds, where it came from) and `weights.bpk` (burnpack; a behaviour
+//! cloning ensemble adds `weights.member<m>.bpk` for members 1, 2, ...), and [`Policy`], which
+//! loads them and acts deterministically (the mean action; an ensemble's members' mean).
 
 use burn::module::Module;
 use burn::tensor::Device;
@@ -19,6 +20,8 @@ use crate::LearnError;
 
 /// Largest action chunk of a policy ([`crate::bc::BcConfig::chunk`]).
 pub const MAX_CHUNK: usize = 100;
+/// Most networks of a behaviour-cloning ensemble ([`crate::bc::BcConfig::members`]).
+pub const MAX_MEMBERS: usize = 32;
 
 pub use crate::chunks::{check_ensemble, ChunkPlayer, MAX_ENSEMBLE};
 
@@ -83,6 +86,20 @@ pub struct PolicyMeta {
     /// ([`crate::bc::BcConfig::ensemble`], [`ChunkPlayer`]); `None`: chunks played open-loop.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ensemble: Option<f64>,
+    /// Networks of a behaviour-cloning ensemble ([`crate::bc::BcConfig::members`]): member 0's
+    /// weights in `weights.bpk`, member `m`'s in `weights.member<m>.bpk`; the policy acts with
+    /// the mean of their outputs (of their logits for discrete keys).
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub members: usize,
+}
+
+/// The weights file of ensemble member `m` (0: `weights.bpk`).
+pub fn weights_file(m: usize) -> String {
+    if m == 0 {
+        "weights.bpk".into()
+    } else {
+        format!("weights.member{m}.bpk")
+    }
 }
 
 fn one() -> usize {
@@ -101,13 +118,27 @@ enum Net {
 /// A trained policy, loaded from its folder.
 pub struct Policy {
     meta: PolicyMeta,
-    net: Net,
+    /// One network, or an ensemble's members in order.
+    nets: Vec<Net>,
     device: Device,
 }
 
 /// Writes a policy folder: the weights, then `policy.json` (each atomically).
 pub(crate) fn write(dir: &Path, meta: &PolicyMeta, weights: Vec<u8>) -> Result<(), LearnError> {
-    write_atomic(&dir.join("weights.bpk"), &weights)?;
+    write_members(dir, meta, vec![weights])
+}
+
+/// Writes a policy folder of one or more members' weights (in order, `meta.members` of them),
+/// then `policy.json` (each atomically; the file naming the members comes last).
+pub(crate) fn write_members(
+    dir: &Path,
+    meta: &PolicyMeta,
+    weights: Vec<Vec<u8>>,
+) -> Result<(), LearnError> {
+    debug_assert_eq!(weights.len(), meta.members);
+    for (m, w) in weights.iter().enumerate() {
+        write_atomic(&dir.join(weights_file(m)), w)?;
+    }
     let json = serde_json::to_string_pretty(meta).map_err(|e| LearnError::Io(e.to_string()))?;
     write_atomic(&dir.join("policy.json"), json.as_bytes())
 }
@@ -153,6 +184,7 @@ pub(crate) fn export_ppo(
         discrete: None,
         chunk: 1,
         ensemble: None,
+        members: 1,
     };
     write(dir, &meta, record_bytes(model.valid())?)
 }
@@ -188,6 +220,7 @@ pub(crate) fn export_sac(
         discrete: None,
         chunk: 1,
         ensemble: None,
+        members: 1,
     };
     write(dir, &meta, record_bytes(actor.valid())?)
 }
@@ -237,6 +270,12 @@ impl PolicyMeta {
             ));
         }
         check_ensemble(self.ensemble, self.chunk, "chunk")?;
+        if !(1..=MAX_MEMBERS).contains(&self.members) || (self.members > 1 && self.algo != "bc") {
+            return Err(format!(
+                "members = {} (algo {}): 1..={MAX_MEMBERS} networks, above 1 only for a bc policy",
+                self.members, self.algo
+            ));
+        }
         let mut params = 0usize;
         let mut width = self.obs_dim;
         for &h in self.hidden.iter().chain([&self.net_outputs()]) {
@@ -310,48 +349,31 @@ impl Policy {
         }
         meta.check()
             .map_err(|m| LearnError::Checkpoint(format!("{}: {m}", meta_path.display())))?;
-        let w_path = dir.join("weights.bpk");
-        let weights = std::fs::read(&w_path)
-            .map_err(|e| LearnError::Io(format!("{}: {e}", w_path.display())))?;
         let device = Device::flex();
-        let mut rng = Rng::new(0);
-        let net = match meta.algo.as_str() {
-            "ppo" => {
-                let cfg = PpoConfig {
-                    hidden: meta.hidden.clone(),
-                    activation: meta.activation,
-                    separate: meta.separate,
-                    ..PpoConfig::default()
-                };
-                let m = ActorCritic::new(&mut rng, meta.obs_dim, meta.act_dim, &cfg, &device);
-                Net::Ppo(load_record(m, &weights)?)
-            }
-            // behaviour cloning trains the SAC actor's network
-            "sac" | "bc" => {
-                let cfg = SacConfig {
-                    hidden: meta.hidden.clone(),
-                    activation: meta.activation,
-                    ..SacConfig::default()
-                };
-                let m = SacActor::new(&mut rng, meta.obs_dim, meta.net_outputs(), &cfg, &device);
-                Net::Sac(load_record(m, &weights)?)
-            }
-            other => {
-                return Err(LearnError::Incompatible(format!(
-                    "unknown policy algorithm '{other}'"
-                )));
-            }
-        };
-        let policy = Policy { meta, net, device };
+        let mut nets = Vec::with_capacity(meta.members);
+        for m in 0..meta.members {
+            let w_path = dir.join(weights_file(m));
+            let weights = std::fs::read(&w_path)
+                .map_err(|e| LearnError::Io(format!("{}: {e}", w_path.display())))?;
+            nets.push(load_net(&meta, &weights, &device)?);
+        }
+        let policy = Policy { meta, nets, device };
         // Damaged weights (a NaN anywhere in a bias or in the first layer) show in the action
         // of a plain observation: refuse them here rather than return NaN actions later.
-        for probe in [0.0f32, 1.0] {
-            let a = policy.act(&vec![probe; policy.meta.obs_dim]);
-            if a.iter().any(|x| !x.is_finite()) {
-                return Err(LearnError::Checkpoint(format!(
-                    "{}: the weights give non-finite actions (a damaged file?)",
-                    w_path.display()
-                )));
+        for (m, net) in policy.nets.iter().enumerate() {
+            for probe in [0.0f32, 1.0] {
+                let x = tensor2(
+                    &vec![probe; policy.meta.obs_dim],
+                    1,
+                    policy.meta.obs_dim,
+                    &policy.device,
+                );
+                if policy.outputs(net, x).iter().any(|v| !v.is_finite()) {
+                    return Err(LearnError::Checkpoint(format!(
+                        "{}: the weights give non-finite actions (a damaged file?)",
+                        dir.join(weights_file(m)).display()
+                    )));
+                }
             }
         }
         Ok(policy)
@@ -406,9 +428,24 @@ impl Policy {
             }
         }
         let x = tensor2(&o, rows, od, &self.device);
-        if let (Some(n), Net::Sac(m)) = (self.meta.discrete, &self.net) {
+        // one network's outputs, or the members' mean (summed in member order, in f64)
+        let out = if let [net] = self.nets.as_slice() {
+            self.outputs(net, x)
+        } else {
+            let mut sum: Vec<f64> = Vec::new();
+            for net in &self.nets {
+                let y = self.outputs(net, x.clone());
+                sum.resize(y.len(), 0.0);
+                for (s, v) in sum.iter_mut().zip(&y) {
+                    *s += f64::from(*v);
+                }
+            }
+            let n = self.nets.len() as f64;
+            sum.iter().map(|s| (s / n) as f32).collect()
+        };
+        match self.meta.discrete {
             // the first of the largest logits
-            return to_vec(m.forward(x).0)
+            Some(n) => out
                 .chunks_exact(n)
                 .map(|l| {
                     let mut best = 0;
@@ -419,14 +456,52 @@ impl Policy {
                     }
                     best as f32
                 })
-                .collect();
+                .collect(),
+            None => rescale(&out, &self.meta.low, &self.meta.high),
         }
-        let a = match &self.net {
-            Net::Ppo(m) => to_vec(m.mean(x)),
-            Net::Sac(m) => to_vec(m.mean_action(x)),
-        };
-        rescale(&a, &self.meta.low, &self.meta.high)
     }
+
+    /// A network's raw outputs for the normalised observations `x`: the logits of a discrete
+    /// policy, else the mean action in `[-1, 1]` units.
+    fn outputs(&self, net: &Net, x: burn::tensor::Tensor<2>) -> Vec<f32> {
+        match (net, self.meta.discrete) {
+            (Net::Sac(m), Some(_)) => to_vec(m.forward(x).0),
+            (Net::Sac(m), None) => to_vec(m.mean_action(x)),
+            (Net::Ppo(m), _) => to_vec(m.mean(x)),
+        }
+    }
+}
+
+/// The network `meta` describes, with the weights `bytes`.
+fn load_net(meta: &PolicyMeta, bytes: &[u8], device: &Device) -> Result<Net, LearnError> {
+    let mut rng = Rng::new(0);
+    Ok(match meta.algo.as_str() {
+        "ppo" => {
+            let cfg = PpoConfig {
+                hidden: meta.hidden.clone(),
+                activation: meta.activation,
+                separate: meta.separate,
+                ..PpoConfig::default()
+            };
+            let m = ActorCritic::new(&mut rng, meta.obs_dim, meta.act_dim, &cfg, device);
+            Net::Ppo(load_record(m, bytes)?)
+        }
+        // behaviour cloning trains the SAC actor's network
+        "sac" | "bc" => {
+            let cfg = SacConfig {
+                hidden: meta.hidden.clone(),
+                activation: meta.activation,
+                ..SacConfig::default()
+            };
+            let m = SacActor::new(&mut rng, meta.obs_dim, meta.net_outputs(), &cfg, device);
+            Net::Sac(load_record(m, bytes)?)
+        }
+        other => {
+            return Err(LearnError::Incompatible(format!(
+                "unknown policy algorithm '{other}'"
+            )));
+        }
+    })
 }
 
 #[cfg(test)]

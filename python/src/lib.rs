@@ -718,6 +718,13 @@ impl Policy {
         self.inner.meta().ensemble
     }
 
+    /// Networks of a `bc` ensemble (`members=N` at training; 1 otherwise): `act` and
+    /// `act_chunk` give the mean of their outputs.
+    #[getter]
+    fn members(&self) -> usize {
+        self.inner.meta().members
+    }
+
     /// The task id or scene file it was trained on.
     #[getter]
     fn target(&self) -> String {

@@ -208,6 +208,8 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     )
     .map_err(io)?;
     let tty = std::io::stderr().is_terminal();
+    // an ensemble's members train one after another: their epochs are counted on
+    let total = cfg.epochs * cfg.members;
     let every = (cfg.epochs / 20).max(1);
     let summary = train_bc(
         &demos,
@@ -216,8 +218,8 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
         &note,
         &policy_dir,
         |epoch, loss| {
-            if epoch % every == 0 || epoch + 1 == cfg.epochs {
-                let line = format!("epoch {:>6}/{}  loss {loss:.6}", epoch + 1, cfg.epochs);
+            if epoch % every == 0 || epoch + 1 == total {
+                let line = format!("epoch {:>6}/{total}  loss {loss:.6}", epoch + 1);
                 if tty {
                     eprint!("\r{line:<60}");
                 } else {
