@@ -428,21 +428,18 @@ impl Policy {
             }
         }
         let x = tensor2(&o, rows, od, &self.device);
-        // one network's outputs, or the members' mean (summed in member order, in f64)
-        let out = if let [net] = self.nets.as_slice() {
-            self.outputs(net, x)
-        } else {
-            let mut sum: Vec<f64> = Vec::new();
-            for net in &self.nets {
-                let y = self.outputs(net, x.clone());
-                sum.resize(y.len(), 0.0);
-                for (s, v) in sum.iter_mut().zip(&y) {
-                    *s += f64::from(*v);
-                }
+        // the members' mean (summed in member order, in f64; one network's outputs come back
+        // unchanged: an f32 through f64 divided by 1 is itself)
+        let mut sum: Vec<f64> = Vec::new();
+        for net in &self.nets {
+            let y = self.outputs(net, x.clone());
+            sum.resize(y.len(), 0.0);
+            for (s, v) in sum.iter_mut().zip(&y) {
+                *s += f64::from(*v);
             }
-            let n = self.nets.len() as f64;
-            sum.iter().map(|s| (s / n) as f32).collect()
-        };
+        }
+        let n = self.nets.len() as f64;
+        let out: Vec<f32> = sum.iter().map(|s| (s / n) as f32).collect();
         match self.meta.discrete {
             // the first of the largest logits
             Some(n) => out
