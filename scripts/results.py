@@ -3,13 +3,15 @@
 
     python3 scripts/results.py [--bin PATH] [--runs runs] [--only ppo/MoDe-Franka-Place-v0/0 ...]
     python3 scripts/results.py --only ppo/MoDe-Franka-Lift-v0/0 --variant sep --set separate=true
+    python3 scripts/results.py --only sac/MoDe-Spot-Lift-v0/0 --stop-at 100000
 
 Each run (algorithm, task, seed) trains in chunks with `modesuite train` (the same command
 resumes it) and after each chunk its policy is evaluated with `modesuite eval` on 20 episodes
 from seed 1,000,000 (never a training seed). A line per evaluation goes to
 `runs/<algo>/<task>/seed<k>/evals.jsonl`: env steps, the run's training wall time (from its
 metrics), the success rate and mean return. A run stops at its budget or at its first
-evaluation with every episode successful; the policy of its best evaluation so far is kept in
+evaluation with every episode successful (`--stop-at N` stops this call at N env steps
+instead; the same command without it continues the run); the policy of its best evaluation so far is kept in
 `best_policy/` (with `eval.json`), since a later chunk can do worse (SAC especially). Killed at any moment, it continues where it was: a
 chunk already evaluated is not evaluated again, and training resumes from its checkpoint.
 `--table` prints the markdown table of all evaluations found, `--summary` one row per algorithm
@@ -82,8 +84,12 @@ def append_line(path: Path, obj: dict) -> None:
 
 
 def one_run(binary: str, root: Path, algo: str, task: str, seed: int,
-            variant: str | None = None, sets: list[str] | None = None) -> None:
+            variant: str | None = None, sets: list[str] | None = None,
+            stop_at: int | None = None) -> None:
     chunk, budget = ALGOS[algo]
+    if stop_at is not None:
+        # an earlier stop for this call only: the same command without it continues the run
+        budget = min(budget, stop_at)
     label = f"{task}+{variant}" if variant else task
     d = run_dir(root, algo, label, seed)
     d.mkdir(parents=True, exist_ok=True)
@@ -195,6 +201,9 @@ def main() -> None:
     p.add_argument("--variant", help="a hyper-parameter study's name (runs and ledgers <task>+NAME)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="`train --set` value of the variant (repeatable; needs --variant)")
+    p.add_argument("--stop-at", type=int, metavar="ENV_STEPS",
+                   help="train only up to this many env steps this time (below the algorithm's "
+                        "budget; run again without it to continue to the budget)")
     p.add_argument("--table", action="store_true")
     p.add_argument("--summary", action="store_true",
                    help="one row per algorithm and task from docs/results/evals/")
@@ -205,6 +214,8 @@ def main() -> None:
     if args.summary:
         print(summary())
         return
+    if args.stop_at is not None and args.stop_at <= 0:
+        p.error(f"--stop-at {args.stop_at}: a positive number of env steps")
     if args.set and not args.variant:
         p.error("--set needs --variant NAME (the runs of other settings go elsewhere)")
     if args.variant and (not args.only or not args.variant.replace("-", "").replace("_", "").isalnum()):
@@ -220,7 +231,7 @@ def main() -> None:
                         "e.g. ppo/MoDe-Franka-Place-v0/0")
             plan.append((parts[0], parts[1], int(parts[2])))
     for algo, task, seed in plan:
-        one_run(args.bin, args.runs, algo, task, seed, args.variant, args.set)
+        one_run(args.bin, args.runs, algo, task, seed, args.variant, args.set, args.stop_at)
 
 
 if __name__ == "__main__":
