@@ -198,12 +198,16 @@ fn normaliser(d: &Demos, clip: f64) -> ObsNorm {
 
 /// Trains a policy on `demos` and writes it into `out` (`policy.json`, `weights.bpk`, and
 /// `weights.member<m>.bpk` for each further member); `progress(epoch, loss)` after each epoch,
-/// the epochs of the members counted one after another (`members x epochs` in all; the
-/// summary's loss is the members' mean). `env` is the environment's identity string and `note`
-/// the policy's note (the CLI records the target and action modes there).
+/// its first argument counting the epochs finished so far by all members together
+/// (`members x epochs` in all; the summary's loss is the members' mean). An ensemble's members
+/// train on up to `threads` threads side by side (0: all cores); each draws from its own
+/// random streams, so the policy does not depend on `threads`. `env` is the environment's
+/// identity string and `note` the policy's note (the CLI records the target and action modes
+/// there).
 pub fn train_bc(
     demos: &Demos,
     cfg: &BcConfig,
+    threads: usize,
     env: &str,
     note: &str,
     out: &Path,
@@ -304,73 +308,17 @@ pub fn train_bc(
             t
         }
     };
-    let device = Device::flex().autodiff();
-    let sac = SacConfig {
-        hidden: cfg.hidden.clone(),
-        activation: cfg.activation,
-        ..SacConfig::default()
+    let data = MemberData {
+        obs: &obs,
+        target: &target,
+        od,
+        outputs,
+        discrete: demos.discrete.is_some(),
     };
-    let b = cfg.batch_size.min(n);
-    let (mut loss_sum, mut steps) = (0.0, 0u64);
-    let mut weights = Vec::with_capacity(cfg.members);
-    for member in 0..cfg.members {
-        // member 0 draws as a single network always has; the others from streams of their own
-        let (mut rng, mut noise_rng) = if member == 0 {
-            (Rng::new(cfg.seed), Rng::derive(cfg.seed, 1))
-        } else {
-            let m = member as u64;
-            (
-                Rng::derive(cfg.seed, 2 * m + 100),
-                Rng::derive(cfg.seed, 2 * m + 101),
-            )
-        };
-        let mut actor = SacActor::new(&mut rng, od, outputs, &sac, &device);
-        let mut opt = AdamConfig::new().with_epsilon(1e-8).init();
-        let mut order: Vec<usize> = (0..n).collect();
-        let mut final_loss = 0.0;
-        for epoch in 0..cfg.epochs {
-            rng.shuffle(&mut order);
-            let (mut sum, mut count) = (0.0, 0usize);
-            for chunk in order.chunks(b) {
-                let rows = chunk.len();
-                let mut x = Vec::with_capacity(rows * od);
-                let mut y = Vec::with_capacity(rows * outputs);
-                for &i in chunk {
-                    x.extend_from_slice(&obs[i * od..(i + 1) * od]);
-                    y.extend_from_slice(&target[i * outputs..(i + 1) * outputs]);
-                }
-                if cfg.input_noise > 0.0 {
-                    for v in &mut x {
-                        *v += (cfg.input_noise * noise_rng.normal()) as f32;
-                    }
-                }
-                let x = tensor2(&x, rows, od, &device);
-                let y = tensor2(&y, rows, outputs, &device);
-                let loss = if demos.discrete.is_some() {
-                    // cross-entropy of the logits against the one-hot keys
-                    let logp = log_softmax(actor.forward(x).0, 1);
-                    -(logp * y).sum_dim(1).mean()
-                } else {
-                    (actor.mean_action(x) - y).square().mean()
-                };
-                let grads = GradientsParams::from_grads(loss.backward(), &actor);
-                actor = opt.step(cfg.learning_rate, actor, grads);
-                let l = f64::from(scalar(loss));
-                if !l.is_finite() {
-                    return Err(LearnError::Diverged(format!(
-                        "behaviour cloning: the loss became {l} in epoch {epoch}"
-                    )));
-                }
-                sum += l * rows as f64;
-                count += rows;
-                steps += 1;
-            }
-            final_loss = sum / count.max(1) as f64;
-            progress(member * cfg.epochs + epoch, final_loss);
-        }
-        loss_sum += final_loss;
-        weights.push(record_bytes(actor.valid())?);
-    }
+    let trained = train_members(&data, cfg, threads, &mut progress)?;
+    let loss_sum: f64 = trained.iter().map(|m| m.final_loss).sum();
+    let steps = trained.iter().map(|m| m.steps).sum();
+    let weights = trained.into_iter().map(|m| m.weights).collect();
     let meta = PolicyMeta {
         format_version: POLICY_FORMAT_VERSION,
         algo: "bc".into(),
@@ -402,6 +350,174 @@ pub fn train_bc(
     })
 }
 
+/// The normalised inputs and targets every member trains on.
+struct MemberData<'a> {
+    obs: &'a [f32],
+    target: &'a [f32],
+    od: usize,
+    outputs: usize,
+    discrete: bool,
+}
+
+/// One trained member: its weights (burnpack bytes), last epoch's loss and gradient steps.
+struct Member {
+    weights: Vec<u8>,
+    final_loss: f64,
+    steps: u64,
+}
+
+/// Trains the `cfg.members` networks, on up to `threads` threads (0: all cores), and returns
+/// them in member order; `progress` is called on this thread after every epoch of any member.
+fn train_members(
+    data: &MemberData,
+    cfg: &BcConfig,
+    threads: usize,
+    progress: &mut impl FnMut(usize, f64),
+) -> Result<Vec<Member>, LearnError> {
+    let threads = match threads {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        t => t,
+    }
+    .clamp(1, cfg.members);
+    let mut done = 0;
+    if threads == 1 {
+        return (0..cfg.members)
+            .map(|m| {
+                train_member(m, data, cfg, &mut |loss| {
+                    progress(done, loss);
+                    done += 1;
+                })
+            })
+            .collect();
+    }
+    let (tx, rx) = std::sync::mpsc::channel::<f64>();
+    let results = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|w| {
+                let tx = tx.clone();
+                scope.spawn(move || {
+                    // worker w trains members w, w + threads, ...
+                    (w..cfg.members)
+                        .step_by(threads)
+                        .map(|m| {
+                            let r = train_member(m, data, cfg, &mut |loss| {
+                                let _ = tx.send(loss);
+                            });
+                            (m, r)
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        drop(tx);
+        for loss in rx {
+            progress(done, loss);
+            done += 1;
+        }
+        workers
+            .into_iter()
+            .flat_map(|h| h.join().expect("a BC member's thread panicked"))
+            .collect::<Vec<_>>()
+    });
+    let mut ordered: Vec<Option<Result<Member, LearnError>>> =
+        (0..cfg.members).map(|_| None).collect();
+    for (m, r) in results {
+        ordered[m] = Some(r);
+    }
+    ordered
+        .into_iter()
+        .map(|r| r.expect("every member trained"))
+        .collect()
+}
+
+/// Trains member `member` of the ensemble (member 0 draws exactly as a single network always
+/// has, the others from streams of their own); `epoch_done(loss)` after each epoch.
+fn train_member(
+    member: usize,
+    data: &MemberData,
+    cfg: &BcConfig,
+    epoch_done: &mut dyn FnMut(f64),
+) -> Result<Member, LearnError> {
+    let MemberData {
+        obs,
+        target,
+        od,
+        outputs,
+        discrete,
+    } = *data;
+    let n = obs.len() / od;
+    let device = Device::flex().autodiff();
+    let sac = SacConfig {
+        hidden: cfg.hidden.clone(),
+        activation: cfg.activation,
+        ..SacConfig::default()
+    };
+    let b = cfg.batch_size.min(n);
+    let (mut rng, mut noise_rng) = if member == 0 {
+        (Rng::new(cfg.seed), Rng::derive(cfg.seed, 1))
+    } else {
+        let m = member as u64;
+        (
+            Rng::derive(cfg.seed, 2 * m + 100),
+            Rng::derive(cfg.seed, 2 * m + 101),
+        )
+    };
+    let mut actor = SacActor::new(&mut rng, od, outputs, &sac, &device);
+    let mut opt = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut order: Vec<usize> = (0..n).collect();
+    let (mut final_loss, mut steps) = (0.0, 0u64);
+    for epoch in 0..cfg.epochs {
+        rng.shuffle(&mut order);
+        let (mut sum, mut count) = (0.0, 0usize);
+        for chunk in order.chunks(b) {
+            let rows = chunk.len();
+            let mut x = Vec::with_capacity(rows * od);
+            let mut y = Vec::with_capacity(rows * outputs);
+            for &i in chunk {
+                x.extend_from_slice(&obs[i * od..(i + 1) * od]);
+                y.extend_from_slice(&target[i * outputs..(i + 1) * outputs]);
+            }
+            if cfg.input_noise > 0.0 {
+                for v in &mut x {
+                    *v += (cfg.input_noise * noise_rng.normal()) as f32;
+                }
+            }
+            let x = tensor2(&x, rows, od, &device);
+            let y = tensor2(&y, rows, outputs, &device);
+            let loss = if discrete {
+                // cross-entropy of the logits against the one-hot keys
+                let logp = log_softmax(actor.forward(x).0, 1);
+                -(logp * y).sum_dim(1).mean()
+            } else {
+                (actor.mean_action(x) - y).square().mean()
+            };
+            let grads = GradientsParams::from_grads(loss.backward(), &actor);
+            actor = opt.step(cfg.learning_rate, actor, grads);
+            let l = f64::from(scalar(loss));
+            if !l.is_finite() {
+                return Err(LearnError::Diverged(format!(
+                    "behaviour cloning: the loss became {l} in epoch {epoch}{}",
+                    if member > 0 {
+                        format!(" of member {member}")
+                    } else {
+                        String::new()
+                    }
+                )));
+            }
+            sum += l * rows as f64;
+            count += rows;
+            steps += 1;
+        }
+        final_loss = sum / count.max(1) as f64;
+        epoch_done(final_loss);
+    }
+    Ok(Member {
+        weights: record_bytes(actor.valid())?,
+        final_loss,
+        steps,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -424,8 +540,8 @@ mod tests {
     /// An ensemble of 3 members acts with the mean of its networks' outputs (in `[-1, 1]`
     /// units, then scaled into the bounds): each member loaded alone (its weights file renamed
     /// to `weights.bpk`, `members` 1) gives its part, member 0 is bit for bit the network a
-    /// single-member run trains, the members differ, and a discrete ensemble takes the arg-max
-    /// of the mean logits.
+    /// single-member run trains, the members differ, members trained on several threads give
+    /// the same policy, and a discrete ensemble takes the arg-max of the mean logits.
     #[test]
     fn an_ensemble_acts_with_the_mean_of_its_members() {
         // a noisy target: the members fit it differently
@@ -447,12 +563,23 @@ mod tests {
             std::env::temp_dir().join(format!("modesuite-bc-members-{}", std::process::id()));
         let dir = base.join("ens");
         let mut epochs = 0;
-        train_bc(&demos, &cfg, "sine", "{}", &dir, |_, _| epochs += 1).unwrap();
+        train_bc(&demos, &cfg, 1, "sine", "{}", &dir, |_, _| epochs += 1).unwrap();
         assert_eq!(epochs, 60, "progress counts every member's epochs");
         let ens = Policy::load(&dir).unwrap();
         assert_eq!(ens.meta().members, 3);
         let x = [0.3f32, 1.1, 1.9];
         let got = ens.act(&x);
+        // the members trained on 2 and 3 threads side by side: the same policy, bit for bit
+        for threads in [2, 3] {
+            let d = base.join(format!("threads{threads}"));
+            let mut count = 0;
+            train_bc(&demos, &cfg, threads, "sine", "{}", &d, |_, _| count += 1).unwrap();
+            assert_eq!(
+                count, 60,
+                "progress counts every member's epochs ({threads} threads)"
+            );
+            assert_eq!(Policy::load(&d).unwrap().act(&x), got, "{threads} threads");
+        }
         // each member alone
         let parts: Vec<Vec<f32>> = (0..3)
             .map(|m| {
@@ -493,6 +620,7 @@ mod tests {
                 members: 1,
                 ..cfg.clone()
             },
+            1,
             "sine",
             "{}",
             &one,
@@ -514,6 +642,7 @@ mod tests {
                 epochs: 200,
                 ..cfg.clone()
             },
+            1,
             "keys",
             "{}",
             &kdir,
@@ -559,7 +688,7 @@ mod tests {
             ..BcConfig::default()
         };
         let dir = std::env::temp_dir().join(format!("modesuite-bc-chunk-{}", std::process::id()));
-        let s = train_bc(&demos, &cfg, "counter", "{}", &dir, |_, _| {}).unwrap();
+        let s = train_bc(&demos, &cfg, 1, "counter", "{}", &dir, |_, _| {}).unwrap();
         let p = Policy::load(&dir).unwrap();
         assert_eq!((p.meta().chunk, p.act_dim()), (3, 1));
         // t = 4 of the first demonstration: 0.4, 0.5, then its last (0.5) again, not the
@@ -585,13 +714,13 @@ mod tests {
             act: vec![0.0; 10],
             ..demos.clone()
         };
-        let e = train_bc(&keys, &cfg, "k", "{}", &dir, |_, _| {}).unwrap_err();
+        let e = train_bc(&keys, &cfg, 1, "k", "{}", &dir, |_, _| {}).unwrap_err();
         assert!(e.to_string().contains("chunk = 3"), "{e}");
         let bad_ends = Demos {
             episode_ends: vec![6, 9],
             ..demos.clone()
         };
-        let e = train_bc(&bad_ends, &cfg, "k", "{}", &dir, |_, _| {}).unwrap_err();
+        let e = train_bc(&bad_ends, &cfg, 1, "k", "{}", &dir, |_, _| {}).unwrap_err();
         assert!(e.to_string().contains("episode_ends"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -614,7 +743,7 @@ mod tests {
             };
             let dir = std::env::temp_dir()
                 .join(format!("modesuite-bc-noise-{noise}-{}", std::process::id()));
-            train_bc(&demos, &cfg, "step", "{}", &dir, |_, _| {}).unwrap();
+            train_bc(&demos, &cfg, 1, "step", "{}", &dir, |_, _| {}).unwrap();
             let a = Policy::load(&dir).unwrap().act(&[0.1])[0];
             let _ = std::fs::remove_dir_all(&dir);
             a
@@ -691,7 +820,7 @@ mod tests {
         };
         let dir =
             std::env::temp_dir().join(format!("modesuite-bc-discrete-{}", std::process::id()));
-        let s = train_bc(&demos, &cfg, "keys", "{}", &dir, |_, _| {}).unwrap();
+        let s = train_bc(&demos, &cfg, 1, "keys", "{}", &dir, |_, _| {}).unwrap();
         let p = Policy::load(&dir).unwrap();
         assert_eq!((p.meta().discrete, p.act_dim()), (Some(3), 1));
         let got = p.act(&obs);
@@ -703,7 +832,7 @@ mod tests {
         assert_eq!(right, 200);
         let mut bad = demos.clone();
         bad.act[7] = 3.0;
-        let e = train_bc(&bad, &cfg, "keys", "{}", &dir, |_, _| {}).unwrap_err();
+        let e = train_bc(&bad, &cfg, 1, "keys", "{}", &dir, |_, _| {}).unwrap_err();
         assert!(e.to_string().contains("sample 7 has 3"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -208,12 +208,13 @@ pub fn train(args: &TrainArgs, out: &mut dyn Write) -> Result<(), CliError> {
     )
     .map_err(io)?;
     let tty = std::io::stderr().is_terminal();
-    // an ensemble's members train one after another: their epochs are counted on
+    // an ensemble's members train side by side on `--threads`: all their epochs are counted
     let total = cfg.epochs * cfg.members;
     let every = (cfg.epochs / 20).max(1);
     let summary = train_bc(
         &demos,
         &cfg,
+        args.threads,
         &identity,
         &note,
         &policy_dir,

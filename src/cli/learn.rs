@@ -37,7 +37,8 @@ pub struct TrainArgs {
     /// Envs stepped together.
     #[arg(long, default_value_t = 16)]
     pub envs: usize,
-    /// Threads stepping the envs (0: all cores; results do not depend on it).
+    /// Threads stepping the envs, or training a BC ensemble's members side by side (0: all
+    /// cores; results do not depend on it).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// The run folder (config, metrics, checkpoint, policy); an existing run there resumes.
