@@ -366,8 +366,9 @@ struct Member {
     steps: u64,
 }
 
-/// Trains the `cfg.members` networks, on up to `threads` threads (0: all cores), and returns
-/// them in member order; `progress` is called on this thread after every epoch of any member.
+/// Trains the `cfg.members` networks on up to `threads` worker threads (0: all cores; one
+/// worker trains them one after another), and returns them in member order; `progress` is
+/// called on this thread after every epoch of any member.
 fn train_members(
     data: &MemberData,
     cfg: &BcConfig,
@@ -379,40 +380,31 @@ fn train_members(
         t => t,
     }
     .clamp(1, cfg.members);
-    let mut done = 0;
-    if threads == 1 {
-        return (0..cfg.members)
-            .map(|m| {
-                train_member(m, data, cfg, &mut |loss| {
-                    progress(done, loss);
-                    done += 1;
-                })
-            })
-            .collect();
-    }
     let (tx, rx) = std::sync::mpsc::channel::<f64>();
     let results = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
             .map(|w| {
                 let tx = tx.clone();
                 scope.spawn(move || {
-                    // worker w trains members w, w + threads, ...
-                    (w..cfg.members)
-                        .step_by(threads)
-                        .map(|m| {
-                            let r = train_member(m, data, cfg, &mut |loss| {
-                                let _ = tx.send(loss);
-                            });
-                            (m, r)
-                        })
-                        .collect::<Vec<_>>()
+                    // worker w trains members w, w + threads, ... and stops at its first error
+                    let mut out = Vec::new();
+                    for m in (w..cfg.members).step_by(threads) {
+                        let r = train_member(m, data, cfg, &mut |loss| {
+                            let _ = tx.send(loss);
+                        });
+                        let failed = r.is_err();
+                        out.push((m, r));
+                        if failed {
+                            break;
+                        }
+                    }
+                    out
                 })
             })
             .collect();
         drop(tx);
-        for loss in rx {
+        for (done, loss) in rx.into_iter().enumerate() {
             progress(done, loss);
-            done += 1;
         }
         workers
             .into_iter()
@@ -424,10 +416,12 @@ fn train_members(
     for (m, r) in results {
         ordered[m] = Some(r);
     }
-    ordered
-        .into_iter()
-        .map(|r| r.expect("every member trained"))
-        .collect()
+    // in member order: a worker's error comes before the members it left untrained
+    let mut members = Vec::with_capacity(cfg.members);
+    for r in ordered {
+        members.push(r.expect("members after a failed one are not reached")?);
+    }
+    Ok(members)
 }
 
 /// Trains member `member` of the ensemble (member 0 draws exactly as a single network always
